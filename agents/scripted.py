@@ -1,0 +1,90 @@
+"""The paper's scripted follower: hold height and yaw, move horizontally to keep the target centred.
+
+It sees only the observation: the filtered target position and velocity relative to the
+drone (heading frame). The height held is the height above the target at episode start.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+# Action scale of TradeFollow-v0 (QuadrotorConfig limits): m/s per unit action.
+DEFAULT_MAX_SPEED_HORIZONTAL_MPS = 8.0
+DEFAULT_MAX_SPEED_VERTICAL_MPS = 3.0
+
+
+@dataclass(frozen=True)
+class ScriptedFollowerConfig:
+    """Gains [1/s], feed-forward fraction, camera pitch [deg] and the env's action scale."""
+
+    position_gain_per_s: float = 0.8
+    height_gain_per_s: float = 0.6
+    velocity_feedforward: float = 1.0
+    camera_pitch_deg: float = 90.0
+    max_speed_horizontal_mps: float = DEFAULT_MAX_SPEED_HORIZONTAL_MPS
+    max_speed_vertical_mps: float = DEFAULT_MAX_SPEED_VERTICAL_MPS
+
+    def __post_init__(self) -> None:
+        for name in ("position_gain_per_s", "height_gain_per_s", "max_speed_horizontal_mps",
+                     "max_speed_vertical_mps"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"ScriptedFollowerConfig.{name} must be > 0, got {value!r}")
+        if not 30.0 <= self.camera_pitch_deg <= 90.0:
+            raise ValueError(f"camera_pitch_deg must be in [30, 90], got {self.camera_pitch_deg!r}")
+
+
+class ScriptedFollower:
+    """`predict(obs) -> (action, state)`; works on one observation or a batch (leading axis)."""
+
+    def __init__(self, config: ScriptedFollowerConfig | None = None) -> None:
+        self.config = config or ScriptedFollowerConfig()
+        self._hold_height_m: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self._hold_height_m = None
+
+    def predict(
+        self,
+        observation: dict[str, np.ndarray],
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
+        rel = np.asarray(observation["target_pos_rel_m"], dtype=np.float64)
+        batched = rel.ndim == 2
+        rel = rel.reshape(-1, 3)
+        vel = np.asarray(observation["target_vel_mps"], dtype=np.float64).reshape(-1, 3)
+        valid_ever = np.any(rel != 0.0, axis=1)
+        height = -rel[:, 2]  # drone height above the target [m]
+        n = len(rel)
+        if self._hold_height_m is None or len(self._hold_height_m) != n:
+            self._hold_height_m = np.full(n, np.nan)
+        if episode_start is not None:
+            starts = np.asarray(episode_start, bool).reshape(-1)
+            self._hold_height_m = np.where(starts, np.nan, self._hold_height_m)
+        # The first valid estimate of an episode fixes the height to hold.
+        unset = np.isnan(self._hold_height_m) & valid_ever
+        self._hold_height_m = np.where(unset, height, self._hold_height_m)
+        action = np.stack([self._act(rel[i], vel[i], self._hold_height_m[i], valid_ever[i])
+                           for i in range(len(rel))]).astype(np.float32)
+        return (action if batched else action[0]), state
+
+    def _act(self, rel: np.ndarray, vel: np.ndarray, hold_height_m: float, valid: bool) -> np.ndarray:
+        cfg = self.config
+        if not valid or not np.isfinite(hold_height_m):
+            return np.zeros(4)
+        # Desired horizontal offset: the target sits on the optical axis at the held height.
+        ahead_m = hold_height_m / np.tan(np.radians(cfg.camera_pitch_deg))
+        error_xy = rel[:2] - np.array([ahead_m, 0.0])
+        v_xy = cfg.velocity_feedforward * vel[:2] + cfg.position_gain_per_s * error_xy
+        v_z = cfg.height_gain_per_s * (hold_height_m - (-rel[2]))
+        return np.array([
+            np.clip(v_xy[0] / cfg.max_speed_horizontal_mps, -1.0, 1.0),
+            np.clip(v_xy[1] / cfg.max_speed_horizontal_mps, -1.0, 1.0),
+            np.clip(v_z / cfg.max_speed_vertical_mps, -1.0, 1.0),
+            0.0,
+        ])

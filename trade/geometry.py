@@ -1,0 +1,133 @@
+"""Camera model and rigid transforms shared by every stage of the stack.
+
+Frames: world z up; camera OpenCV (x right, y down, z along the optical axis).
+`Pose` named by what it maps: `T_world_cam` maps camera-frame points to world.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """Pinhole intrinsics; pixel centres at integer coordinates (OpenCV)."""
+
+    fx_px: float
+    fy_px: float
+    cx_px: float
+    cy_px: float
+    width_px: int
+    height_px: int
+
+    def __post_init__(self) -> None:
+        for name in ("fx_px", "fy_px"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"CameraIntrinsics.{name} must be finite and > 0, got {value!r}")
+        for name in ("width_px", "height_px"):
+            value = getattr(self, name)
+            if int(value) != value or value <= 0:
+                raise ValueError(f"CameraIntrinsics.{name} must be a positive integer, got {value!r}")
+
+    @classmethod
+    def from_fov(cls, width_px: int, height_px: int, fov_deg: float) -> CameraIntrinsics:
+        """Square pixels; `fov_deg` is the vertical field of view (OpenGL convention)."""
+        if not 0.0 < fov_deg < 180.0:
+            raise ValueError(f"fov_deg must be in (0, 180), got {fov_deg!r}")
+        f = 0.5 * height_px / np.tan(np.radians(fov_deg) / 2.0)
+        return cls(f, f, width_px / 2.0 - 0.5, height_px / 2.0 - 0.5, int(width_px), int(height_px))
+
+    @property
+    def K(self) -> FloatArray:
+        """3x3 camera matrix."""
+        return np.array([[self.fx_px, 0.0, self.cx_px], [0.0, self.fy_px, self.cy_px], [0.0, 0.0, 1.0]])
+
+    def project(self, points_cam: FloatArray) -> FloatArray:
+        """points_cam: (N, 3) camera frame [m] -> (N, 2) pixels; NaN where z <= 0."""
+        pts = np.atleast_2d(np.asarray(points_cam, dtype=np.float64))
+        z = pts[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = self.fx_px * pts[:, 0] / z + self.cx_px
+            v = self.fy_px * pts[:, 1] / z + self.cy_px
+        uv = np.stack([u, v], axis=1)
+        uv[~(z > 0)] = np.nan
+        return uv
+
+    def rays(self, pixels: FloatArray) -> FloatArray:
+        """pixels: (N, 2) -> (N, 3) camera-frame rays with z = 1."""
+        px = np.atleast_2d(np.asarray(pixels, dtype=np.float64))
+        x = (px[:, 0] - self.cx_px) / self.fx_px
+        y = (px[:, 1] - self.cy_px) / self.fy_px
+        return np.stack([x, y, np.ones_like(x)], axis=1)
+
+    def backproject(self, pixels: FloatArray, depth_m: FloatArray) -> FloatArray:
+        """pixels: (N, 2), depth_m: (N,) camera-frame z [m] -> (N, 3) camera-frame points."""
+        return self.rays(pixels) * np.asarray(depth_m, dtype=np.float64).reshape(-1, 1)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Rigid transform T_a_b: maps points in frame b to frame a (p_a = R p_b + t)."""
+
+    R: FloatArray  # (3, 3) rotation
+    t: FloatArray  # (3,) translation [m]
+
+    def __post_init__(self) -> None:
+        R = np.asarray(self.R, dtype=np.float64)
+        t = np.asarray(self.t, dtype=np.float64).reshape(3)
+        if R.shape != (3, 3) or not np.all(np.isfinite(R)) or not np.all(np.isfinite(t)):
+            raise ValueError(f"Pose needs a finite 3x3 R and 3-vector t, got R={self.R!r}, t={self.t!r}")
+        object.__setattr__(self, "R", R)
+        object.__setattr__(self, "t", t)
+
+    @classmethod
+    def identity(cls) -> Pose:
+        return cls(np.eye(3), np.zeros(3))
+
+    @property
+    def matrix(self) -> FloatArray:
+        """4x4 homogeneous matrix."""
+        T = np.eye(4)
+        T[:3, :3] = self.R
+        T[:3, 3] = self.t
+        return T
+
+    def inverse(self) -> Pose:
+        return Pose(self.R.T, -self.R.T @ self.t)
+
+    def compose(self, other: Pose) -> Pose:
+        """self ∘ other: T_a_b.compose(T_b_c) = T_a_c."""
+        return Pose(self.R @ other.R, self.R @ other.t + self.t)
+
+    def apply(self, points: FloatArray) -> FloatArray:
+        """points: (N, 3) in frame b -> (N, 3) in frame a."""
+        return np.atleast_2d(points) @ self.R.T + self.t
+
+
+def project_world(K: CameraIntrinsics, T_world_cam: Pose, points_world: FloatArray) -> FloatArray:
+    """World points (N, 3) [m] -> pixels (N, 2); NaN behind the camera."""
+    return K.project(T_world_cam.inverse().apply(points_world))
+
+
+def quat_xyzw_to_matrix(q: FloatArray) -> FloatArray:
+    """Unit quaternion (x, y, z, w) -> 3x3 rotation matrix."""
+    x, y, z, w = (float(c) for c in q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def rotation_z(yaw_rad: float) -> FloatArray:
+    """Rotation about world z by yaw [rad]."""
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

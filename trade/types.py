@@ -1,0 +1,75 @@
+"""Small frozen records passed between the stages of the perception stack.
+
+Boxes are (x, y, w, h) in pixels with (x, y) the top-left corner; IMU in body frame, SI.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class BBox:
+    """Axis-aligned image box: top-left (x_px, y_px), size (w_px, h_px)."""
+
+    x_px: float
+    y_px: float
+    w_px: float
+    h_px: float
+
+    def __post_init__(self) -> None:
+        vals = (self.x_px, self.y_px, self.w_px, self.h_px)
+        if not all(np.isfinite(vals)) or self.w_px <= 0 or self.h_px <= 0:
+            raise ValueError(f"BBox needs finite values and positive size, got {vals!r}")
+
+    @classmethod
+    def from_array(cls, xywh: npt.ArrayLike) -> BBox:
+        x, y, w, h = (float(v) for v in np.asarray(xywh, dtype=np.float64).reshape(4))
+        return cls(x, y, w, h)
+
+    @classmethod
+    def from_center(cls, cx_px: float, cy_px: float, w_px: float, h_px: float) -> BBox:
+        return cls(cx_px - w_px / 2.0, cy_px - h_px / 2.0, w_px, h_px)
+
+    @property
+    def center(self) -> FloatArray:
+        """(2,) centre [px]."""
+        return np.array([self.x_px + self.w_px / 2.0, self.y_px + self.h_px / 2.0])
+
+    def as_array(self) -> FloatArray:
+        return np.array([self.x_px, self.y_px, self.w_px, self.h_px])
+
+
+def iou(a: npt.ArrayLike, b: npt.ArrayLike) -> float:
+    """IoU of two (x, y, w, h) boxes; 0.0 when either is missing (NaN) or empty."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        return 0.0
+    ix = max(0.0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
+    iy = max(0.0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
+    inter = ix * iy
+    union = a[2] * a[3] + b[2] * b[3] - inter
+    return float(inter / union) if union > 0 else 0.0
+
+
+@dataclass(frozen=True)
+class ImuBatch:
+    """IMU samples delivered with one camera frame.
+
+    t_s: (N,) timestamps [s]; accel_mps2: (N, 3) specific force in body frame [m/s^2]
+    (reads +9.81 on body z when hovering); gyro_radps: (N, 3) angular rate in body frame.
+    """
+
+    t_s: FloatArray
+    accel_mps2: FloatArray
+    gyro_radps: FloatArray
+
+    @classmethod
+    def empty(cls) -> ImuBatch:
+        return cls(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
