@@ -1,0 +1,129 @@
+"""Spec tests for trade.temporal_fusion: gating, ring buffer, reuse and re-initialisation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from trade.planes import MultiRansacConfig
+from trade.temporal_fusion import TemporalFusionConfig, TemporalPlaneFusion
+
+NOISE_M = 0.05
+N_PER_FRAME = 120
+
+
+def ground_frame(rng: np.random.Generator, z_m: float = 0.0, n: int = N_PER_FRAME, slope: float = 0.05) -> np.ndarray:
+    """n points on z = z_m + slope * x over a 30 m patch, noise NOISE_M."""
+    xy = rng.uniform(-15.0, 15.0, (n, 2))
+    return np.c_[xy, z_m + slope * xy[:, 0] + rng.normal(0.0, NOISE_M, n)]
+
+
+def steady_fusion(n_frames: int = 5, **overrides: int) -> tuple[TemporalPlaneFusion, np.random.Generator]:
+    rng = np.random.default_rng(0)
+    fusion = TemporalPlaneFusion(TemporalFusionConfig(**overrides), np.random.default_rng(1))
+    for _ in range(n_frames):
+        res = fusion.update(ground_frame(rng))
+        assert not res.reused and res.n_accepted >= 0.95 * N_PER_FRAME  # all, unless the gate is < 10 sigma
+    return fusion, rng
+
+
+def test_fusion_sudden_5m_plane_jump_is_gated_out_and_plane_stays() -> None:
+    fusion, rng = steady_fusion()
+    before = fusion.plane
+    assert before is not None and abs(before.height_at([0.0, 0.0])) < 0.05
+    res = fusion.update(ground_frame(rng, z_m=5.0))
+    assert res.n_accepted == 0 and res.n_rejected == N_PER_FRAME and res.reused
+    assert res.plane is before and res.n_buffered == 5 * N_PER_FRAME
+    assert 0.5 <= res.gate_m < 5.0
+
+
+def test_fusion_frame_within_gate_is_accepted_and_refits() -> None:
+    fusion, rng = steady_fusion()
+    res = fusion.update(ground_frame(rng, z_m=0.1))
+    assert res.n_accepted == N_PER_FRAME and not res.reused and res.plane is not None
+    assert res.n_buffered == 6 * N_PER_FRAME and abs(res.plane.height_at([0.0, 0.0])) < 0.1
+
+
+def test_fusion_gate_is_mse_factor_times_rms_of_buffer_fit_with_floor() -> None:
+    fusion, rng = steady_fusion(gate_min_m=0.01)  # floor out of the way: 3 x 0.05 m noise
+    assert fusion.update(ground_frame(rng)).gate_m == pytest.approx(3.0 * NOISE_M, rel=0.15)
+    floored, rng2 = steady_fusion()
+    assert floored.update(ground_frame(rng2)).gate_m == pytest.approx(0.5)
+
+
+def test_fusion_buffer_never_exceeds_size_and_drops_oldest_first() -> None:
+    fusion = TemporalPlaneFusion(TemporalFusionConfig(), np.random.default_rng(2))
+    rng, frames = np.random.default_rng(3), []
+    for k in range(12):  # 12 x 120 = 1440 points > 1000
+        frame = ground_frame(rng)
+        frame[:, 1] = 1000.0 * k + np.arange(N_PER_FRAME)  # y tags (frame, index); still planar
+        frames.append(frame)
+        res = fusion.update(frame)
+        assert res.n_buffered == min((k + 1) * N_PER_FRAME, 1000) and res.n_accepted == N_PER_FRAME
+    np.testing.assert_array_equal(fusion.buffered_points, np.concatenate(frames)[-1000:])
+
+
+def test_fusion_frame_larger_than_buffer_keeps_its_newest_points() -> None:
+    cfg = TemporalFusionConfig(buffer_size=50, min_points=10)
+    fusion = TemporalPlaneFusion(cfg, np.random.default_rng(4))
+    frame = ground_frame(np.random.default_rng(5), n=80)
+    fusion.update(frame[:30])
+    res = fusion.update(frame[30:])
+    assert res.n_buffered == 50
+    np.testing.assert_array_equal(fusion.buffered_points, frame[30:])
+
+
+def test_fusion_too_few_points_reuses_stored_plane_without_buffering() -> None:
+    fusion, rng = steady_fusion()
+    before = fusion.plane
+    res = fusion.update(ground_frame(rng, n=5))
+    assert res.reused and res.plane is before and res.n_buffered == 5 * N_PER_FRAME
+    assert fusion.update(np.zeros((0, 3))).reused
+
+
+def test_fusion_first_frame_buffers_only_its_own_multi_ransac_inliers() -> None:
+    rng = np.random.default_rng(6)
+    outliers = np.c_[rng.uniform(-15.0, 15.0, (30, 2)), rng.uniform(10.0, 30.0, 30)]
+    fusion = TemporalPlaneFusion(TemporalFusionConfig(), np.random.default_rng(7))
+    res = fusion.update(np.r_[ground_frame(rng), outliers, [[np.nan, 0.0, 0.0]]])
+    assert res.n_accepted == N_PER_FRAME and res.n_rejected == 31 and not res.reused
+    assert np.all(fusion.buffered_points[:, 2] < 2.0)
+
+
+def test_fusion_ground_that_moved_for_good_reinitialises_after_max_gated_frames() -> None:
+    fusion, rng = steady_fusion(max_gated_frames=3)
+    results = [fusion.update(ground_frame(rng, z_m=5.0)) for _ in range(3)]
+    assert [r.reused for r in results] == [True, True, False]
+    assert results[-1].reinitialised and results[-1].n_buffered == N_PER_FRAME
+    assert results[-1].plane is not None and abs(results[-1].plane.height_at([0.0, 0.0]) - 5.0) < 0.1
+
+
+def test_fusion_reset_forgets_plane_and_buffer() -> None:
+    fusion, _ = steady_fusion()
+    fusion.reset()
+    assert fusion.plane is None and fusion.buffered_points.shape == (0, 3)
+    res = fusion.update(np.zeros((2, 3)))
+    assert res.plane is None and not res.reused
+
+
+def test_fusion_same_seed_same_planes() -> None:
+    a, _ = steady_fusion()
+    b, _ = steady_fusion()
+    assert a.plane is not None and b.plane is not None
+    np.testing.assert_array_equal(a.plane.normal, b.plane.normal)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("buffer_size", 2), ("min_points", 2000), ("gate_mse_factor", 0.0), ("gate_min_m", -1.0), ("max_gated_frames", -1)],
+)
+def test_fusion_config_bad_field_raises_naming_it(field: str, value: float) -> None:
+    with pytest.raises(ValueError, match=field):
+        TemporalFusionConfig(**{field: value})
+
+
+def test_fusion_uses_injected_ransac_config() -> None:
+    cfg = TemporalFusionConfig(ransac=MultiRansacConfig(inlier_threshold_m=0.05, min_iterations=16))
+    fusion = TemporalPlaneFusion(cfg, np.random.default_rng(8))
+    res = fusion.update(ground_frame(np.random.default_rng(9)))
+    assert res.n_accepted < N_PER_FRAME  # a 5 cm band drops part of the 5 cm-noise points
