@@ -1,0 +1,1 @@
+"""Simulator components: world, vehicles, quadrotor and its sensors (pybullet, one client per env)."""

@@ -1,0 +1,148 @@
+"""Simulated MEMS IMU: resamples the physics ground truth at the IMU rate and adds noise.
+
+Owns the noise model (white noise + bias random walk, MPU-9250 densities) and the sample clock.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from trade.types import ImuBatch
+
+FloatArray = npt.NDArray[np.float64]
+
+_CLOCK_TOLERANCE_S = 1e-9  # a sample due at t counts as reached when truth time >= t - tolerance
+_N_NOISE_COLUMNS = 12  # accel white (3), gyro white (3), accel bias steps (3), gyro bias steps (3)
+
+
+@dataclass(frozen=True)
+class ImuConfig:
+    """IMU rate and noise densities (continuous-time, per sqrt(Hz)).
+
+    Defaults: MPU-9250 datasheet white noise (accel 300 ug/sqrt(Hz) = 2.94e-3 m/s^2/sqrt(Hz), gyro
+    0.01 deg/s/sqrt(Hz) = 1.75e-4 rad/s/sqrt(Hz)); bias random walks of a consumer MEMS IMU as in the
+    VINS-Mono defaults (accel 4e-5 m/s^3/sqrt(Hz), gyro 2e-6 rad/s^2/sqrt(Hz)); initial biases of a
+    calibrated unit. Discrete model per sample: white sigma = density * sqrt(rate_hz); bias step sigma =
+    random_walk * sqrt(1 / rate_hz). `enabled=False` switches noise and bias off: the IMU then
+    delivers the interpolated truth (still at rate_hz).
+    """
+
+    rate_hz: float = 200.0
+    accel_noise_density_mps2_per_rthz: float = 2.94e-3
+    gyro_noise_density_radps_per_rthz: float = 1.75e-4
+    accel_bias_random_walk_mps3_per_rthz: float = 4.0e-5
+    gyro_bias_random_walk_radps2_per_rthz: float = 2.0e-6
+    accel_initial_bias_sigma_mps2: float = 0.02
+    gyro_initial_bias_sigma_radps: float = 1.0e-3
+    enabled: bool = True  # noise and bias on
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(self.rate_hz) or self.rate_hz <= 0:
+            raise ValueError(f"ImuConfig.rate_hz must be finite and > 0, got {self.rate_hz!r}")
+        non_negative = (
+            "accel_noise_density_mps2_per_rthz", "gyro_noise_density_radps_per_rthz",
+            "accel_bias_random_walk_mps3_per_rthz", "gyro_bias_random_walk_radps2_per_rthz",
+            "accel_initial_bias_sigma_mps2", "gyro_initial_bias_sigma_radps",
+        )
+        for name in non_negative:
+            value = getattr(self, name)
+            if not math.isfinite(value) or value < 0:
+                raise ValueError(f"ImuConfig.{name} must be finite and >= 0, got {value!r}")
+
+    @property
+    def period_s(self) -> float:
+        return 1.0 / self.rate_hz
+
+    @property
+    def white_sigma(self) -> FloatArray:
+        """(6,) per-sample white noise sigma [accel m/s^2 x3, gyro rad/s x3] = density * sqrt(rate)."""
+        root = math.sqrt(self.rate_hz)
+        return np.repeat([self.accel_noise_density_mps2_per_rthz * root,
+                          self.gyro_noise_density_radps_per_rthz * root], 3)
+
+    @property
+    def bias_step_sigma(self) -> FloatArray:
+        """(6,) per-sample bias random-walk step sigma = random_walk * sqrt(1 / rate)."""
+        root = math.sqrt(1.0 / self.rate_hz)
+        return np.repeat([self.accel_bias_random_walk_mps3_per_rthz * root,
+                          self.gyro_bias_random_walk_radps2_per_rthz * root], 3)
+
+
+class Imu:
+    """Samples at t0 + k / rate_hz (k >= 1) from truth given after every physics step.
+
+    `add_truth` only stores; `read` interpolates, adds noise and returns every sample whose
+    timestamp is at or before the latest truth time and after the previous read.
+    """
+
+    def __init__(self, config: ImuConfig, rng: np.random.Generator) -> None:
+        self.config = config
+        self.reset(0.0, rng)
+
+    def reset(self, t0_s: float, rng: np.random.Generator) -> None:
+        """Restart the sample clock at `t0_s` [s], draw initial biases from `rng`, drop stored truth."""
+        cfg = self.config
+        self._rng = rng
+        self._white_sigma, self._bias_step_sigma = cfg.white_sigma, cfg.bias_step_sigma
+        self._t0_s = float(t0_s)
+        self._next_k = 1
+        self._truth: list[tuple[float, float, float, float, float, float, float]] = []
+        sigma0 = np.repeat([cfg.accel_initial_bias_sigma_mps2, cfg.gyro_initial_bias_sigma_radps], 3)
+        self._bias = sigma0 * rng.standard_normal(6) if cfg.enabled else np.zeros(6)
+
+    @property
+    def accel_bias_mps2(self) -> FloatArray:
+        """(3,) current accelerometer bias [m/s^2] (after the last delivered sample)."""
+        return self._bias[:3].copy()
+
+    @property
+    def gyro_bias_radps(self) -> FloatArray:
+        """(3,) current gyro bias [rad/s] (after the last delivered sample)."""
+        return self._bias[3:].copy()
+
+    def add_truth(self, t_s: float, specific_force_body: npt.ArrayLike, gyro_body: npt.ArrayLike) -> None:
+        """Store truth at `t_s` [s]: specific force (3,) body [m/s^2], angular rate (3,) body [rad/s]."""
+        f, w = specific_force_body, gyro_body
+        self._truth.append((float(t_s), float(f[0]), float(f[1]), float(f[2]),
+                            float(w[0]), float(w[1]), float(w[2])))
+
+    def read(self) -> ImuBatch:
+        """Samples due since the previous read: t_s (N,), accel (N, 3) [m/s^2], gyro (N, 3) [rad/s]."""
+        if not self._truth:
+            return ImuBatch.empty()
+        cfg = self.config
+        truth = np.array(self._truth)  # (M, 7): t, f (3), w (3)
+        self._truth = [self._truth[-1]]  # keep the latest as the anchor for the next interpolation
+        t_last = truth[-1, 0]
+        # last sample index due: k_end = floor((t_last - t0) rate + tolerance)
+        k_end = math.floor((t_last - self._t0_s + _CLOCK_TOLERANCE_S) * cfg.rate_hz)
+        if k_end < self._next_k:
+            return ImuBatch.empty()
+        t_s = self._t0_s + np.arange(self._next_k, k_end + 1) * cfg.period_s
+        self._next_k = k_end + 1
+        values = _interpolate(truth[:, 0], truth[:, 1:], t_s)  # (N, 6)
+        if cfg.enabled:
+            values = values + self._noise(len(t_s))
+        return ImuBatch(t_s=t_s, accel_mps2=values[:, :3], gyro_radps=values[:, 3:])
+
+    def _noise(self, n: int) -> FloatArray:
+        """(n, 6) noise: bias_k = bias_{k-1} + sigma_b * N(0, 1); sample = bias_k + sigma_w * N(0, 1)."""
+        draws = self._rng.standard_normal((n, _N_NOISE_COLUMNS))
+        bias = self._bias + np.cumsum(draws[:, 6:] * self._bias_step_sigma, axis=0)
+        self._bias = bias[-1].copy()
+        return bias + draws[:, :6] * self._white_sigma
+
+
+def _interpolate(t_truth: FloatArray, values: FloatArray, t_query: FloatArray) -> FloatArray:
+    """Linear interpolation of values (M, D) at t_truth (M,) to t_query (N,); held flat outside."""
+    if len(t_truth) == 1:
+        return np.repeat(values, len(t_query), axis=0)
+    # fractional truth index s(t) by np.interp, then x = x_i + (s - i) (x_{i+1} - x_i), i = floor(s)
+    s = np.interp(t_query, t_truth, np.arange(len(t_truth), dtype=np.float64))
+    i = np.minimum(s.astype(np.intp), len(t_truth) - 2)
+    w = (s - i)[:, None]
+    return values[i] + w * (values[i + 1] - values[i])

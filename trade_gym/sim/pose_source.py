@@ -1,0 +1,114 @@
+"""Camera pose given to perception: exact ground truth ("gt") or a VIO-like drifting estimate ("vio").
+
+Owns the drift model: random walks in position and yaw whose increments scale with the distance flown.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from trade.geometry import Pose, rotation_z
+
+POSE_SOURCE_NAMES = ("gt", "vio")
+
+
+@dataclass(frozen=True)
+class VioConfig:
+    """Drift of a visual-inertial odometry pose, in its four unobservable directions.
+
+    Position (world x, y, z) and yaw errors are random walks driven by the distance flown: over a
+    distance d each axis gains N(0, sigma^2 d). Defaults give ~1 m (1 % of distance) per axis and
+    ~1.1 deg of yaw after 100 m, typical of filter-based VIO such as xVIO on long, high flights
+    (the paper reports VIO poses noticeably worse than ground truth). Roll and pitch stay exact
+    because gravity makes them observable.
+    """
+
+    position_drift_sigma_m_per_sqrt_m: float = 0.1
+    yaw_drift_sigma_rad_per_sqrt_m: float = 0.002
+
+    def __post_init__(self) -> None:
+        for name in ("position_drift_sigma_m_per_sqrt_m", "yaw_drift_sigma_rad_per_sqrt_m"):
+            value = getattr(self, name)
+            if not math.isfinite(value) or value < 0:
+                raise ValueError(f"VioConfig.{name} must be finite and >= 0, got {value!r}")
+
+
+class PoseSource(Protocol):
+    """Anything that turns the true camera pose into the pose perception sees."""
+
+    def reset(self, rng: np.random.Generator) -> None: ...
+
+    def estimate(self, T_world_cam_true: Pose, distance_flown_m: float) -> Pose: ...
+
+
+class GroundTruthPoseSource:
+    """Returns the true camera pose unchanged."""
+
+    def reset(self, rng: np.random.Generator) -> None:
+        """Nothing to reset; accepts the generator for a common interface."""
+
+    def estimate(self, T_world_cam_true: Pose, distance_flown_m: float) -> Pose:
+        return T_world_cam_true
+
+
+class VioPoseSource:
+    """Drifting pose: p_est = p + dp, R_est = Rz(dpsi) R, with dp, dpsi random walks in distance flown.
+
+    `distance_flown_m` is the odometer since reset (monotone); each call advances the walks by the
+    distance dd flown since the previous call: dp += sigma_p sqrt(dd) N(0, I3),
+    dpsi += sigma_psi sqrt(dd) N(0, 1).
+    """
+
+    def __init__(self, config: VioConfig, rng: np.random.Generator) -> None:
+        self.config = config
+        self.reset(rng)
+
+    def reset(self, rng: np.random.Generator) -> None:
+        self._rng = rng
+        self._position_error_m = np.zeros(3)
+        self._yaw_error_rad = 0.0
+        self._last_distance_m = 0.0
+
+    @property
+    def position_error_m(self) -> np.ndarray:
+        """(3,) current world position drift [m]."""
+        return self._position_error_m.copy()
+
+    @property
+    def yaw_error_rad(self) -> float:
+        """Current yaw drift [rad]."""
+        return self._yaw_error_rad
+
+    def estimate(self, T_world_cam_true: Pose, distance_flown_m: float) -> Pose:
+        """Drifted T_world_cam; `distance_flown_m` is the total distance flown since reset [m]."""
+        distance = float(distance_flown_m)
+        if not math.isfinite(distance) or distance < self._last_distance_m:
+            raise ValueError(
+                f"distance_flown_m must be finite and non-decreasing, got {distance!r} "
+                f"after {self._last_distance_m!r}"
+            )
+        step = distance - self._last_distance_m
+        self._last_distance_m = distance
+        if step > 0.0:
+            cfg, root = self.config, math.sqrt(step)
+            draws = self._rng.standard_normal(4)
+            position_step = cfg.position_drift_sigma_m_per_sqrt_m * root * draws[:3]
+            self._position_error_m = self._position_error_m + position_step
+            self._yaw_error_rad += cfg.yaw_drift_sigma_rad_per_sqrt_m * root * float(draws[3])
+        T = T_world_cam_true
+        return Pose(rotation_z(self._yaw_error_rad) @ T.R, T.t + self._position_error_m)
+
+
+def make_pose_source(name: str, rng: np.random.Generator, vio_config: VioConfig | None = None) -> PoseSource:
+    """Pose source by name ("gt" or "vio"), reset with `rng`; ValueError for any other name."""
+    if name == "gt":
+        source: PoseSource = GroundTruthPoseSource()
+        source.reset(rng)
+        return source
+    if name == "vio":
+        return VioPoseSource(vio_config if vio_config is not None else VioConfig(), rng)
+    raise ValueError(f"unknown pose_source {name!r}; valid: {', '.join(POSE_SOURCE_NAMES)}")

@@ -1,0 +1,287 @@
+"""Quadrotor airframe in pybullet and its cascaded velocity -> attitude controller.
+
+Owns the rigid body (a box with mass and inertia), the setpoint limits and the ground-truth DroneState.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pybullet as p
+
+FloatArray = npt.NDArray[np.float64]
+
+_BODY_LINK = -1  # pybullet link index of a multibody's base
+_ORIGIN = (0.0, 0.0, 0.0)  # thrust acts at the centre of mass
+_AIRFRAME_RGBA = (0.15, 0.15, 0.15, 1.0)
+_MIN_UPRIGHTNESS = 0.5  # floor on world z of body z when dividing by it (tilt is limited far below 60 deg)
+_POSITIVE_FIELDS = (
+    "mass_kg", "max_speed_horizontal_mps", "max_speed_vertical_mps", "max_accel_mps2", "max_yaw_rate_radps",
+    "velocity_gain_horizontal_per_s", "velocity_gain_vertical_per_s", "attitude_natural_freq_radps",
+    "attitude_damping_ratio", "max_yaw_lead_rad",
+)
+
+
+@dataclass(frozen=True)
+class QuadrotorConfig:
+    """Airframe, setpoint limits and controller gains; SI units.
+
+    Gains: velocity error -> acceleration by `velocity_gain_*_per_s` (first-order time constant
+    1/gain); attitude tracked by a PD law with natural frequency `attitude_natural_freq_radps`
+    and damping ratio `attitude_damping_ratio` (kR = w^2, kw = 2 zeta w, scaled by the inertia).
+    """
+
+    mass_kg: float = 1.5
+    inertia_kgm2: tuple[float, float, float] = (0.029, 0.029, 0.055)  # principal, body x/y/z
+    half_extents_m: tuple[float, float, float] = (0.25, 0.25, 0.06)
+    max_speed_horizontal_mps: float = 8.0
+    max_speed_vertical_mps: float = 3.0
+    max_accel_mps2: float = 4.0  # bounds the horizontal norm and the vertical part separately
+    max_tilt_deg: float = 30.0
+    tilt_margin_deg: float = 0.5  # commanded tilt <= max_tilt - margin, so tracking lag stays inside
+    max_yaw_rate_radps: float = 1.5
+    max_thrust_to_weight: float = 2.5
+    min_thrust_to_weight: float = 0.2
+    velocity_gain_horizontal_per_s: float = 2.0
+    velocity_gain_vertical_per_s: float = 3.0
+    attitude_natural_freq_radps: float = 25.0
+    attitude_damping_ratio: float = 1.0  # critically damped: no tilt overshoot
+    max_yaw_lead_rad: float = 0.5  # yaw setpoint may run at most this far ahead of the yaw
+
+    def __post_init__(self) -> None:
+        for name in ("inertia_kgm2", "half_extents_m"):
+            value = getattr(self, name)
+            _require(len(value) == 3 and all(math.isfinite(v) and v > 0 for v in value), name, value,
+                     "three finite values > 0")
+        for name in _POSITIVE_FIELDS:
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value > 0, name, value, "finite and > 0")
+        _require(0.0 < self.max_tilt_deg < 90.0, "max_tilt_deg", self.max_tilt_deg, "in (0, 90)")
+        _require(0.0 <= self.tilt_margin_deg < self.max_tilt_deg, "tilt_margin_deg", self.tilt_margin_deg,
+                 "in [0, max_tilt_deg)")
+        _require(0.0 < self.min_thrust_to_weight < 1.0, "min_thrust_to_weight", self.min_thrust_to_weight,
+                 "in (0, 1)")
+        _require(self.max_thrust_to_weight > 1.0, "max_thrust_to_weight", self.max_thrust_to_weight, "> 1")
+
+
+def _require(ok: bool, name: str, value: object, requirement: str) -> None:
+    if not ok:
+        raise ValueError(f"QuadrotorConfig.{name} must be {requirement}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class DroneState:
+    """Ground truth after a physics step.
+
+    position_m: (3,) world; R_world_body: (3, 3); velocity_mps: (3,) world;
+    angular_velocity_body_radps: (3,) body; yaw_rad: heading of body x in world;
+    specific_force_body_mps2: (3,) body, R^T (a - g) (+9.81 on z when hovering); t_s: time since spawn.
+    """
+
+    position_m: FloatArray
+    R_world_body: FloatArray
+    velocity_mps: FloatArray
+    angular_velocity_body_radps: FloatArray
+    yaw_rad: float
+    specific_force_body_mps2: FloatArray
+    t_s: float
+
+
+class Quadrotor:
+    """A box-shaped quadrotor flown by velocity (heading frame) and yaw-rate setpoints.
+
+    Per physics step: `physics_step(dt_s)`, then `p.stepSimulation`, then `read_state()`.
+    `physics_step` reuses the reading of a `read_state()` made since the last step (saves two
+    pybullet queries), so move the airframe only through `spawn()`, never between those calls.
+    Gravity is read from the engine at `spawn()`; the controller compensates it exactly.
+    """
+
+    def __init__(self, client_id: int, config: QuadrotorConfig | None = None) -> None:
+        self.client_id = int(client_id)
+        self.config = config if config is not None else QuadrotorConfig()
+        cfg = self.config
+        self._tan_tilt = math.tan(math.radians(cfg.max_tilt_deg - cfg.tilt_margin_deg))
+        self._k_att = cfg.attitude_natural_freq_radps**2  # kR = w^2
+        self._k_rate = 2.0 * cfg.attitude_damping_ratio * cfg.attitude_natural_freq_radps  # kw = 2 zeta w
+        self.body_id: int | None = None
+        self._reset_internal(0.0)
+
+    def _reset_internal(self, yaw_rad: float) -> None:
+        self._setpoint = (0.0, 0.0, 0.0, 0.0)  # forward, left, up [m/s], yaw rate [rad/s]
+        self._yaw_sp = float(yaw_rad)
+        self._t_s = 0.0
+        self._dt_s = 0.0
+        self._v_pre = (0.0, 0.0, 0.0)
+        self._m_pre: tuple[float, ...] | None = None  # row-major R_world_body before the last step
+        self._gravity_z = 0.0
+        self._last_read: tuple[tuple[float, ...], ...] | None = None  # (v, w_world, R) of read_state()
+
+    def spawn(self, position_m: npt.ArrayLike, yaw_rad: float) -> int:
+        """Create the airframe at `position_m` (3,) world [m], level, heading `yaw_rad`; returns its id."""
+        c, cfg = self.client_id, self.config
+        pos = [float(v) for v in np.asarray(position_m, dtype=np.float64).reshape(3)]
+        col = p.createCollisionShape(p.GEOM_BOX, halfExtents=cfg.half_extents_m, physicsClientId=c)
+        vis = p.createVisualShape(p.GEOM_BOX, halfExtents=cfg.half_extents_m, rgbaColor=_AIRFRAME_RGBA,
+                                  physicsClientId=c)
+        quat = p.getQuaternionFromEuler((0.0, 0.0, float(yaw_rad)), physicsClientId=c)
+        body = p.createMultiBody(cfg.mass_kg, col, vis, pos, quat, physicsClientId=c)
+        p.changeDynamics(body, _BODY_LINK, linearDamping=0.0, angularDamping=0.0,
+                         localInertiaDiagonal=cfg.inertia_kgm2,
+                         activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=c)
+        self.body_id = body
+        self._reset_internal(yaw_rad)
+        self._gravity_z = float(p.getPhysicsEngineParameters(physicsClientId=c)["gravityAccelerationZ"])
+        return body
+
+    def set_setpoint(self, velocity_heading_mps: npt.ArrayLike, yaw_rate_radps: float) -> None:
+        """velocity_heading_mps: (3,) forward, left, up in the yaw-only heading frame [m/s]; clipped."""
+        fwd, left, up = (float(v) for v in np.asarray(velocity_heading_mps, dtype=np.float64).reshape(3))
+        rate = float(yaw_rate_radps)
+        if not all(math.isfinite(v) for v in (fwd, left, up, rate)):
+            raise ValueError(f"setpoint must be finite, got velocity {(fwd, left, up)!r}, yaw rate {rate!r}")
+        cfg = self.config
+        horizontal = math.hypot(fwd, left)
+        if horizontal > cfg.max_speed_horizontal_mps:  # clip the horizontal norm, keep the direction
+            scale = cfg.max_speed_horizontal_mps / horizontal
+            fwd, left = fwd * scale, left * scale
+        up = min(max(up, -cfg.max_speed_vertical_mps), cfg.max_speed_vertical_mps)
+        rate = min(max(rate, -cfg.max_yaw_rate_radps), cfg.max_yaw_rate_radps)
+        self._setpoint = (fwd, left, up, rate)
+
+    def physics_step(self, dt_s: float) -> None:
+        """Compute and apply thrust and torques (body frame) for the next physics step of `dt_s` [s]."""
+        if self.body_id is None:
+            raise RuntimeError("Quadrotor.physics_step called before spawn()")
+        c, b, cfg = self.client_id, self.body_id, self.config
+        if self._last_read is not None:  # read_state() after the last step: same pybullet state
+            vel, omega_w, m = self._last_read
+            self._last_read = None
+        else:
+            _, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
+            vel, omega_w = p.getBaseVelocity(b, physicsClientId=c)
+            m = p.getMatrixFromQuaternion(quat, physicsClientId=c)  # row-major R_world_body
+        yaw = math.atan2(m[3], m[0])
+        fx, fy, fz = self._desired_specific_thrust(yaw, vel)
+        fn = math.sqrt(fx * fx + fy * fy + fz * fz)
+        zdx, zdy, zdz = fx / fn, fy / fn, fz / fn  # desired body z
+        # yaw setpoint: psi_d += r dt, kept within max_yaw_lead of the yaw
+        rate_sp = self._setpoint[3]
+        lead = _wrap(self._yaw_sp + rate_sp * dt_s - yaw)
+        lead = min(max(lead, -cfg.max_yaw_lead_rad), cfg.max_yaw_lead_rad)
+        self._yaw_sp = yaw + lead
+        cy, sy = math.cos(self._yaw_sp), math.sin(self._yaw_sp)
+        # y_d = z_d x x_c / |.| with x_c = (cos psi_d, sin psi_d, 0); x_d = y_d x z_d
+        ydx, ydy, ydz = -zdz * sy, zdz * cy, zdx * sy - zdy * cy
+        yn = math.sqrt(ydx * ydx + ydy * ydy + ydz * ydz)
+        ydx, ydy, ydz = ydx / yn, ydy / yn, ydz / yn
+        xdx, xdy, xdz = ydy * zdz - ydz * zdy, ydz * zdx - ydx * zdz, ydx * zdy - ydy * zdx
+        # e_R = 1/2 vee(Rd^T R - R^T Rd); (Rd^T R)_ij = col_i(Rd) . col_j(R)
+        xb, yb, zb = (m[0], m[3], m[6]), (m[1], m[4], m[7]), (m[2], m[5], m[8])
+        ex = 0.5 * ((zdx * yb[0] + zdy * yb[1] + zdz * yb[2]) - (ydx * zb[0] + ydy * zb[1] + ydz * zb[2]))
+        ey = 0.5 * ((xdx * zb[0] + xdy * zb[1] + xdz * zb[2]) - (zdx * xb[0] + zdy * xb[1] + zdz * xb[2]))
+        ez = 0.5 * ((ydx * xb[0] + ydy * xb[1] + ydz * xb[2]) - (xdx * yb[0] + xdy * yb[1] + xdz * yb[2]))
+        # body rates w_b = R^T w_world
+        wx = m[0] * omega_w[0] + m[3] * omega_w[1] + m[6] * omega_w[2]
+        wy = m[1] * omega_w[0] + m[4] * omega_w[1] + m[7] * omega_w[2]
+        wz = m[2] * omega_w[0] + m[5] * omega_w[1] + m[8] * omega_w[2]
+        # yawing at r with z_d fixed turns R_d about z_d at W = r (e_z . z_d) / (1 - (x_c . z_d)^2);
+        # desired body rate w_d = W R^T z_d
+        xc_dot_zd = cy * zdx + sy * zdy
+        spin = rate_sp * zdz / (1.0 - xc_dot_zd * xc_dot_zd)
+        ewx = wx - spin * (xb[0] * zdx + xb[1] * zdy + xb[2] * zdz)
+        ewy = wy - spin * (yb[0] * zdx + yb[1] * zdy + yb[2] * zdz)
+        ewz = wz - spin * (zb[0] * zdx + zb[1] * zdy + zb[2] * zdz)
+        jx, jy, jz = cfg.inertia_kgm2
+        ka, kr = self._k_att, self._k_rate
+        # tau = J (-kR e_R - kw e_w) + w x J w
+        torque = (
+            jx * (-ka * ex - kr * ewx) + (jz - jy) * wy * wz,
+            jy * (-ka * ey - kr * ewy) + (jx - jz) * wz * wx,
+            jz * (-ka * ez - kr * ewz) + (jy - jx) * wx * wy,
+        )
+        # collective thrust T = m f_z / z_b,z realises the vertical acceleration whatever the attitude lag
+        weight = -cfg.mass_kg * self._gravity_z
+        thrust = cfg.mass_kg * fz / max(zb[2], _MIN_UPRIGHTNESS)
+        thrust = min(max(thrust, 0.0), cfg.max_thrust_to_weight * weight)
+        p.applyExternalForce(b, _BODY_LINK, (0.0, 0.0, thrust), _ORIGIN, p.LINK_FRAME, physicsClientId=c)
+        p.applyExternalTorque(b, _BODY_LINK, torque, p.LINK_FRAME, physicsClientId=c)
+        self._v_pre, self._m_pre, self._dt_s = vel, m, float(dt_s)
+        self._t_s += float(dt_s)
+
+    def _desired_specific_thrust(self, yaw: float, vel: tuple[float, ...]) -> tuple[float, float, float]:
+        """Thrust per mass (3,) world [m/s^2]: f = clip(a_d) - g with tilt and thrust limits."""
+        cfg = self.config
+        fwd, left, up, _ = self._setpoint
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        # v_sp world = Rz(yaw) (fwd, left, up); a_d = K (v_sp - v), |a_d,xy| <= a_max, |a_d,z| <= a_max
+        kh, kv = cfg.velocity_gain_horizontal_per_s, cfg.velocity_gain_vertical_per_s
+        a_max = cfg.max_accel_mps2
+        ax = kh * (cy * fwd - sy * left - vel[0])
+        ay = kh * (sy * fwd + cy * left - vel[1])
+        az = min(max(kv * (up - vel[2]), -a_max), a_max)
+        an = math.hypot(ax, ay)
+        if an > a_max:
+            s = a_max / an
+            ax, ay = ax * s, ay * s
+        g = -self._gravity_z
+        fz = max(az + g, cfg.min_thrust_to_weight * g)
+        horizontal = math.hypot(ax, ay)
+        h_max = fz * self._tan_tilt  # tilt limit: |f_xy| <= f_z tan(max_tilt)
+        if horizontal > h_max:
+            s = h_max / horizontal
+            ax, ay = ax * s, ay * s
+        return ax, ay, fz
+
+    def read_state(self) -> DroneState:
+        """Ground truth after the last step; specific force R_pre^T ((v - v_pre)/dt - g)."""
+        if self.body_id is None:
+            raise RuntimeError("Quadrotor.read_state called before spawn()")
+        c, b = self.client_id, self.body_id
+        pos, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
+        vel, w = p.getBaseVelocity(b, physicsClientId=c)
+        m = p.getMatrixFromQuaternion(quat, physicsClientId=c)  # row-major R_world_body
+        self._last_read = (vel, w, m)
+        if self._m_pre is None:  # nothing stepped yet: at rest
+            ax = ay = az = 0.0
+            mp = m
+        else:  # a = (v - v_pre) / dt, exact for the semi-implicit Euler step
+            inv_dt, v0 = 1.0 / self._dt_s, self._v_pre
+            ax, ay, az = (vel[0] - v0[0]) * inv_dt, (vel[1] - v0[1]) * inv_dt, (vel[2] - v0[2]) * inv_dt
+            mp = self._m_pre
+        az -= self._gravity_z  # f = a - g
+        # one array: position (3), R (9), velocity (3), w_body = R^T w_world (3), f_body = R_pre^T f (3)
+        flat = np.array((
+            *pos, *m, *vel,
+            m[0] * w[0] + m[3] * w[1] + m[6] * w[2], m[1] * w[0] + m[4] * w[1] + m[7] * w[2],
+            m[2] * w[0] + m[5] * w[1] + m[8] * w[2],
+            mp[0] * ax + mp[3] * ay + mp[6] * az, mp[1] * ax + mp[4] * ay + mp[7] * az,
+            mp[2] * ax + mp[5] * ay + mp[8] * az,
+        ))
+        return DroneState(
+            position_m=flat[0:3],
+            R_world_body=flat[3:12].reshape(3, 3),
+            velocity_mps=flat[12:15],
+            angular_velocity_body_radps=flat[15:18],
+            yaw_rad=math.atan2(m[3], m[0]),
+            specific_force_body_mps2=flat[18:21],
+            t_s=self._t_s,
+        )
+
+    def collided(self, static_body_ids: Iterable[int] | None = None) -> bool:
+        """True if the airframe touches any of `static_body_ids` (any body when None) after the last step."""
+        if self.body_id is None:
+            return False
+        contacts = p.getContactPoints(bodyA=self.body_id, physicsClientId=self.client_id)
+        if static_body_ids is None:
+            return len(contacts) > 0
+        ids = static_body_ids if isinstance(static_body_ids, (set, frozenset)) else set(static_body_ids)
+        return any(contact[2] in ids for contact in contacts)
+
+
+def _wrap(angle_rad: float) -> float:
+    """Wrap an angle to [-pi, pi)."""
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
