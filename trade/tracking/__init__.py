@@ -1,0 +1,24 @@
+"""Correlation filter tracking with trajectory-guided peak selection (paper: "Tracking with trajectory estimates").
+
+Features, the DCF tracker and its score maps, and the choice of a peak near a predicted location.
+"""
+
+from trade.tracking.dcf import DcfConfig, DcfTracker
+from trade.tracking.features import FeatureConfig, extract_features
+from trade.tracking.peaks import PeakChoice, PeakConfig, ResponseMap, highest_peak, select_peak
+from trade.tracking.scale import ScaleConfig
+from trade.tracking.window import sample_windows
+
+__all__ = [
+    "DcfConfig",
+    "DcfTracker",
+    "FeatureConfig",
+    "PeakChoice",
+    "PeakConfig",
+    "ResponseMap",
+    "ScaleConfig",
+    "extract_features",
+    "highest_peak",
+    "sample_windows",
+    "select_peak",
+]

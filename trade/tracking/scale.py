@@ -1,0 +1,107 @@
+"""One-dimensional DSST scale filter: estimates how much the target's size changed since the last frame.
+
+Owns the scale sample pyramid, its Fourier-domain filter over scales and the running-average update.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from trade.tracking.features import FeatureConfig, extract_features
+from trade.tracking.peaks import parabola_vertex_offset
+from trade.tracking.window import blur_batch, sample_windows
+
+FloatArray = npt.NDArray[np.float64]
+ImageRGB = npt.NDArray[np.uint8]
+
+
+@dataclass(frozen=True)
+class ScaleConfig:
+    """DSST scale search (Danelljan et al. 2014): n_scales samples of the box at scale_step ** k."""
+
+    n_scales: int = 17  # odd; k = -(n - 1) / 2 .. (n - 1) / 2
+    scale_step: float = 1.03
+    sigma_factor: float = 0.25  # label sigma = sigma_factor * sqrt(n_scales) [scale steps]
+    model_max_area_px: int = 576  # each sample is resized to at most this area, in whole cells
+    min_model_cells: int = 2  # lower bound on either side of a sample's cell grid
+    sample_blur_sigma_px: float = 1.5  # Gaussian blur of each resized sample [sample px], >= 0
+    regularisation: float = 1e-2  # lambda in A / (B + lambda)
+    learning_rate: float = 0.025  # eta of the running-average model update
+
+    def __post_init__(self) -> None:
+        checks = {
+            "n_scales": int(self.n_scales) == self.n_scales and self.n_scales >= 3 and self.n_scales % 2 == 1,
+            "scale_step": self.scale_step > 1.0,
+            "sigma_factor": self.sigma_factor > 0,
+            "model_max_area_px": int(self.model_max_area_px) == self.model_max_area_px and self.model_max_area_px > 0,
+            "min_model_cells": int(self.min_model_cells) == self.min_model_cells and self.min_model_cells >= 1,
+            "sample_blur_sigma_px": self.sample_blur_sigma_px >= 0,
+            "regularisation": self.regularisation > 0,
+            "learning_rate": 0 < self.learning_rate <= 1,
+        }
+        for name, ok in checks.items():
+            value = getattr(self, name)
+            if not (np.isfinite(value) and ok):
+                raise ValueError(f"ScaleConfig.{name} has invalid value {value!r}")
+
+    @property
+    def exponents(self) -> FloatArray:
+        """(n_scales,) k such that the sample sizes are box size * scale_step ** k."""
+        return np.arange(self.n_scales) - (self.n_scales - 1) / 2
+
+
+class ScaleFilter:
+    """1-D correlation filter over a pyramid of box-sized samples; features are flattened per scale."""
+
+    def __init__(self, config: ScaleConfig, features: FeatureConfig) -> None:
+        self.config = config
+        self.features = features
+        k = config.exponents
+        self._factors = config.scale_step**k
+        self._window = np.hanning(config.n_scales)[:, None]
+        sigma = config.sigma_factor * np.sqrt(config.n_scales)
+        # label g_k = exp(-k^2 / (2 sigma^2)), peak at the middle sample (scale 1)
+        self._label_f = np.fft.fft(np.exp(-(k**2) / (2.0 * sigma**2)))[:, None]
+        self._model_wh: tuple[int, int] | None = None
+
+    def _spectrum(self, image_rgb: ImageRGB, center_px: FloatArray, box_wh_px: FloatArray) -> npt.NDArray:
+        """(n_scales, d) FFT over scales of the Hann-weighted flattened features of each scaled sample."""
+        if self._model_wh is None:
+            raise RuntimeError("ScaleFilter.init must be called first")
+        windows = self._factors[:, None] * np.asarray(box_wh_px, dtype=np.float64)[None, :]
+        # the blur evens out the detail that resampling by different factors keeps at each scale
+        samples = sample_windows(image_rgb, center_px, windows, self._model_wh)
+        samples = blur_batch(samples, self.config.sample_blur_sigma_px)
+        feats = extract_features(samples, self.features)
+        return np.fft.fft(feats.reshape(self.config.n_scales, -1) * self._window, axis=0)
+
+    def init(self, image_rgb: ImageRGB, center_px: FloatArray, box_wh_px: FloatArray) -> None:
+        """Fix the sample size (box aspect, area <= model_max_area_px) and train on this frame."""
+        cfg, cell = self.config, self.features.cell_size_px
+        box = np.asarray(box_wh_px, dtype=np.float64)
+        shrink = min(1.0, float(np.sqrt(cfg.model_max_area_px / box.prod())))
+        cells = np.maximum(np.floor(box * shrink / cell), cfg.min_model_cells).astype(int)
+        self._model_wh = (int(cells[0]) * cell, int(cells[1]) * cell)
+        spectrum = self._spectrum(image_rgb, center_px, box)
+        # A = G conj(X) per feature dimension, B = sum_d |X_d|^2
+        self._num = self._label_f * np.conj(spectrum)
+        self._den = np.sum(spectrum.real**2 + spectrum.imag**2, axis=1)
+
+    def estimate(self, image_rgb: ImageRGB, center_px: FloatArray, box_wh_px: FloatArray) -> float:
+        """Size factor of the target at `center_px` relative to `box_wh_px`, refined between scale steps."""
+        spectrum = self._spectrum(image_rgb, center_px, box_wh_px)
+        # r_k = IFFT( sum_d A_d Z_d / (B + lambda) )
+        resp = np.fft.ifft(np.sum(self._num * spectrum, axis=1) / (self._den + self.config.regularisation)).real
+        best = int(np.argmax(resp))
+        exponent = self.config.exponents[best] + parabola_vertex_offset(resp, best)
+        return float(self.config.scale_step**exponent)
+
+    def update(self, image_rgb: ImageRGB, center_px: FloatArray, box_wh_px: FloatArray) -> None:
+        """A <- (1 - eta) A + eta G conj(X); B <- (1 - eta) B + eta sum_d |X_d|^2."""
+        eta = self.config.learning_rate
+        spectrum = self._spectrum(image_rgb, center_px, box_wh_px)
+        self._num = (1.0 - eta) * self._num + eta * (self._label_f * np.conj(spectrum))
+        self._den = (1.0 - eta) * self._den + eta * np.sum(spectrum.real**2 + spectrum.imag**2, axis=1)
