@@ -1,0 +1,271 @@
+"""The TRADE pipeline: trajectory-guided correlation tracking and robust 3D localisation per frame.
+
+initialise(frame, box, pose) once, then step(frame, pose, imu) per frame; each call returns a
+frozen `Estimate`. Every stage is a component with its own config; ablations are switches here.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from trade.geometry import CameraIntrinsics, Pose
+from trade.planes import MultiRansacConfig, Plane, multi_ransac
+from trade.raycast import RaycastConfig, depth_uncertainty, raycast_plane
+from trade.roi_features import RoiConfig, RoiFeatures, RoiFeatureTracker
+from trade.temporal_fusion import TemporalFusionConfig, TemporalPlaneFusion
+from trade.tracking.dcf import DcfConfig, DcfTracker
+from trade.tracking.peaks import PeakChoice, PeakConfig, highest_peak, select_peak
+from trade.trajectory import TrajectoryConfig, TrajectoryModel
+from trade.types import BBox, ImuBatch
+
+FloatArray = npt.NDArray[np.float64]
+
+# The paper's rule: planes whose normals are < 15 deg apart are one solution and the flattest
+# wins, so a roof parallel to the ground competes with it (the ground mask must remove it).
+PAPER_RANSAC = MultiRansacConfig(parallel_min_separation_m=math.inf, flatness_tolerance_deg=0.0)
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Paper defaults; every ablation of the paper is a switch."""
+
+    dcf: DcfConfig = field(default_factory=DcfConfig)
+    peaks: PeakConfig = field(default_factory=PeakConfig)
+    trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
+    roi: RoiConfig = field(default_factory=RoiConfig)
+    ransac: MultiRansacConfig = PAPER_RANSAC
+    fusion: TemporalFusionConfig = field(default_factory=lambda: TemporalFusionConfig(ransac=PAPER_RANSAC))
+    raycast: RaycastConfig = field(default_factory=RaycastConfig)
+    trajectory_guidance: bool = True  # False: the "dcf" baseline (window on the last box, top peak)
+    temporal_fusion: bool = True
+    ground_mask: bool = False  # needs single-image depth (not part of this stack yet)
+    single_image_depth: bool = False
+    object_height_m: float = 1.5  # prior object height; the plane is lifted by half of it
+    min_plane_points: int = 10  # promoted ROI points a frame needs for its own plane fit
+    min_peak_score: float = 0.15  # below: the target is lost this frame and the estimate coasts
+    trajectory_preview_s: float = 1.0  # horizon of the predicted trajectory kept for drawing
+    trajectory_preview_points: int = 10
+
+    def __post_init__(self) -> None:
+        if self.ground_mask or self.single_image_depth:
+            raise ValueError(
+                "ground_mask and single_image_depth need the single-image depth model, which this "
+                f"stack does not ship yet; got ground_mask={self.ground_mask!r}, "
+                f"single_image_depth={self.single_image_depth!r}"
+            )
+        if not (math.isfinite(self.object_height_m) and self.object_height_m >= 0):
+            raise ValueError(f"PipelineConfig.object_height_m must be finite and >= 0, got {self.object_height_m!r}")
+        if int(self.min_plane_points) != self.min_plane_points or self.min_plane_points < 3:
+            raise ValueError(f"PipelineConfig.min_plane_points must be an integer >= 3, got {self.min_plane_points!r}")
+        if not math.isfinite(self.min_peak_score):
+            raise ValueError(f"PipelineConfig.min_peak_score must be finite, got {self.min_peak_score!r}")
+
+
+@dataclass(frozen=True)
+class StageTimings:
+    """Wall time of each stage in one step [ms]."""
+
+    tracker_ms: float = 0.0
+    roi_ms: float = 0.0
+    plane_ms: float = 0.0
+    fusion_ms: float = 0.0
+    raycast_ms: float = 0.0
+    trajectory_ms: float = 0.0
+
+    @property
+    def total_ms(self) -> float:
+        return (self.tracker_ms + self.roi_ms + self.plane_ms + self.fusion_ms + self.raycast_ms
+                + self.trajectory_ms)
+
+
+@dataclass(frozen=True, eq=False)
+class Estimate:
+    """One frame's output. box: tracked box (None when lost); position/velocity: world [m], [m/s]
+    from the trajectory model (NaN before it starts); depth: camera-frame z of the target [m]."""
+
+    t_s: float
+    box: BBox | None
+    tracked: bool  # a fresh box this frame (the peak passed the score test)
+    peak_score: float
+    ambiguous: bool
+    predicted_px: FloatArray  # (2,) trajectory prediction projected into this frame; NaN if none
+    position_world_m: FloatArray
+    velocity_world_mps: FloatArray
+    depth_m: float
+    depth_sigma_m: float
+    plane: Plane | None
+    n_plane_points: int
+    roi: RoiFeatures | None
+    trajectory_preview_world_m: FloatArray  # (K, 3) predicted positions ahead
+    timings: StageTimings
+
+
+class TradePipeline:
+    """Tracking with trajectory estimates plus robust 3D localisation (paper sections 3-4)."""
+
+    def __init__(self, config: PipelineConfig, intrinsics: CameraIntrinsics, rng: np.random.Generator) -> None:
+        self.config = config
+        self.intrinsics = intrinsics
+        self._rng = rng
+        self.tracker = DcfTracker(config.dcf)
+        self.trajectory = TrajectoryModel(config.trajectory)
+        self.roi = RoiFeatureTracker(config.roi, intrinsics)
+        self.fusion = TemporalPlaneFusion(config.fusion, rng)
+        self._t_s = 0.0
+        self._initialised = False
+
+    def initialise(self, image_rgb: npt.NDArray[np.uint8], box: BBox, T_world_cam: Pose, t_s: float) -> Estimate:
+        """Start tracking `box` (x, y, w, h) [px] in `image_rgb` (H, W, 3) uint8 at time t_s."""
+        self._check_image(image_rgb)
+        self.tracker.init(image_rgb, box)
+        self.trajectory = TrajectoryModel(self.config.trajectory)
+        self.roi.reset()
+        self.fusion.reset()
+        self._t_s = t_s
+        self._initialised = True
+        start = time.perf_counter()
+        roi = self.roi.step(cv2.cvtColor(image_rgb, cv2.COLOR_RGB2GRAY), box, T_world_cam)
+        roi_ms = (time.perf_counter() - start) * 1e3
+        return self._localise(t_s, box, True, 1.0, False, np.full(2, np.nan), roi, T_world_cam,
+                              StageTimings(roi_ms=roi_ms))
+
+    def step(self, image_rgb: npt.NDArray[np.uint8], T_world_cam: Pose, t_s: float,
+             imu: ImuBatch | None = None) -> Estimate:
+        """Track and localise in the next frame. `T_world_cam` comes from the pose estimator (VIO);
+        `imu` is accepted for pose estimators that fuse it and is not used by the stack itself."""
+        if not self._initialised:
+            raise RuntimeError("TradePipeline.step() before initialise()")
+        self._check_image(image_rgb)
+        if t_s <= self._t_s:
+            raise ValueError(f"frame time must increase: got t_s={t_s!r} after {self._t_s!r}")
+        self._t_s = t_s
+        start = time.perf_counter()
+        predicted_px = self._predict_pixel(t_s, T_world_cam)
+        choice, scale = self._choose_peak(image_rgb, predicted_px)
+        tracked = choice.score >= self.config.min_peak_score or not self.config.trajectory_guidance
+        if tracked:
+            box = self.tracker.commit(choice.location_px, scale)
+            if not choice.ambiguous:
+                self.tracker.update(image_rgb)
+        else:
+            box = self._coast_box(predicted_px)
+        tracker_ms = (time.perf_counter() - start) * 1e3
+        start = time.perf_counter()
+        roi = self.roi.step(cv2.cvtColor(image_rgb, cv2.COLOR_RGB2GRAY), box, T_world_cam)
+        roi_ms = (time.perf_counter() - start) * 1e3
+        return self._localise(t_s, box if tracked else None, tracked, choice.score, choice.ambiguous,
+                              predicted_px, roi, T_world_cam, StageTimings(tracker_ms=tracker_ms, roi_ms=roi_ms))
+
+    # ------------------------------------------------------------------ stages
+    def _predict_pixel(self, t_s: float, T_world_cam: Pose) -> FloatArray:
+        """Advance the trajectory model to t_s and project its position; NaN when unavailable."""
+        if not self.trajectory.initialized:
+            return np.full(2, np.nan)
+        state = self.trajectory.predict(t_s)
+        uv = self.intrinsics.project(T_world_cam.inverse().apply(state.position_m.reshape(1, 3)))[0]
+        return uv
+
+    def _choose_peak(self, image_rgb: npt.NDArray[np.uint8], predicted_px: FloatArray) -> tuple[PeakChoice, float]:
+        guided = self.config.trajectory_guidance and self._in_image(predicted_px)
+        centre = predicted_px if guided else self.tracker.box.center
+        response = self.tracker.response(image_rgb, centre)
+        if not self.config.trajectory_guidance:
+            return highest_peak(response, self.config.peaks), response.scale
+        choice = select_peak(response, self.config.peaks)
+        top = highest_peak(response, self.config.peaks)
+        scale = response.scale
+        if not np.allclose(choice.location_px, top.location_px):
+            scale = self.tracker.estimate_scale(image_rgb, choice.location_px)
+        return choice, scale
+
+    def _coast_box(self, predicted_px: FloatArray) -> BBox:
+        """While lost, the box follows the trajectory prediction with its last size."""
+        last = self.tracker.box
+        if not self._in_image(predicted_px):
+            return last
+        return BBox.from_center(predicted_px[0], predicted_px[1], last.w_px, last.h_px)
+
+    def _localise(self, t_s: float, box: BBox | None, tracked: bool, score: float, ambiguous: bool,
+                  predicted_px: FloatArray, roi: RoiFeatures, T_world_cam: Pose,
+                  timings: StageTimings) -> Estimate:
+        cfg = self.config
+        points = roi.points_world[roi.promoted]
+        points = points[np.all(np.isfinite(points), axis=1)]
+        start = time.perf_counter()
+        query_xy = T_world_cam.t[:2]
+        frame_fit = multi_ransac(points, cfg.ransac, self._rng, query_xy) if len(points) >= cfg.min_plane_points \
+            else None
+        plane_ms = (time.perf_counter() - start) * 1e3
+        start = time.perf_counter()
+        plane, solutions = (frame_fit.selected, frame_fit.solutions) if frame_fit is not None else (None, ())
+        if cfg.temporal_fusion:
+            inliers = points[frame_fit.inlier_mask] if frame_fit is not None else np.zeros((0, 3))
+            fused = self.fusion.update(inliers, query_xy)
+            if fused.plane is not None:
+                plane, solutions = fused.plane, fused.solutions
+        fusion_ms = (time.perf_counter() - start) * 1e3
+        start = time.perf_counter()
+        position = np.full(3, np.nan)
+        depth = sigma = float("nan")
+        if box is not None and plane is not None:
+            hit = raycast_plane(self.intrinsics, T_world_cam, box.center, plane, cfg.object_height_m, cfg.raycast)
+            if hit.valid:
+                spread = depth_uncertainty(self.intrinsics, T_world_cam, box.center, solutions or (plane,),
+                                           cfg.object_height_m, cfg.raycast)
+                position, depth = hit.point_world, hit.depth_m
+                sigma = spread.sigma_m if spread.valid else cfg.raycast.min_depth_sigma_m
+        raycast_ms = (time.perf_counter() - start) * 1e3
+        start = time.perf_counter()
+        state = self._update_trajectory(t_s, position, sigma)
+        preview = (self.trajectory.predict_ahead(cfg.trajectory_preview_s, cfg.trajectory_preview_points)
+                   if self.trajectory.initialized else np.zeros((0, 3)))
+        trajectory_ms = (time.perf_counter() - start) * 1e3
+        if state is not None and not np.isfinite(depth):
+            # Coasting: report the depth of the trajectory model's position.
+            depth = float(T_world_cam.inverse().apply(state[0].reshape(1, 3))[0, 2])
+        timings = StageTimings(timings.tracker_ms, timings.roi_ms, plane_ms, fusion_ms, raycast_ms, trajectory_ms)
+        return Estimate(
+            t_s=t_s,
+            box=box,
+            tracked=tracked,
+            peak_score=float(score),
+            ambiguous=bool(ambiguous),
+            predicted_px=predicted_px,
+            position_world_m=np.full(3, np.nan) if state is None else state[0],
+            velocity_world_mps=np.full(3, np.nan) if state is None else state[1],
+            depth_m=depth,
+            depth_sigma_m=sigma,
+            plane=plane,
+            n_plane_points=int(len(points)),
+            roi=roi,
+            trajectory_preview_world_m=preview,
+            timings=timings,
+        )
+
+    def _update_trajectory(self, t_s: float, position: FloatArray, sigma_m: float) -> tuple[FloatArray, FloatArray] | None:
+        """Kalman update from the raycast 3D position (residuals only); None before the first fix."""
+        if not self.trajectory.initialized:
+            if not np.all(np.isfinite(position)):
+                return None
+            self.trajectory.reset(position, t_s)
+        elif np.all(np.isfinite(position)):
+            # predict() already advanced the model to t_s in _predict_pixel (or initialise).
+            self.trajectory.update(position, sigma_m)
+        state = self.trajectory.state
+        return state.position_m.copy(), state.velocity_mps.copy()
+
+    def _in_image(self, pixel: FloatArray) -> bool:
+        K = self.intrinsics
+        return bool(np.all(np.isfinite(pixel)) and 0 <= pixel[0] < K.width_px and 0 <= pixel[1] < K.height_px)
+
+    def _check_image(self, image_rgb: npt.NDArray[np.uint8]) -> None:
+        K = self.intrinsics
+        expected = (K.height_px, K.width_px, 3)
+        if image_rgb.shape != expected or image_rgb.dtype != np.uint8:
+            raise ValueError(f"image must be uint8 of shape {expected}, got {image_rgb.dtype} {image_rgb.shape}")
