@@ -1,0 +1,272 @@
+"""Tests of the simulated world: scenes, terrain, vehicles, determinism and rendered texture detail."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pybullet as p
+import pytest
+
+from trade.geometry import CameraIntrinsics, quat_xyzw_to_matrix
+from trade_gym.sim.scenes import DECOY_NEAR_PATH_M, SCENES, SceneSpec, get_scene
+from trade_gym.sim.spline import CatmullRomSpline
+from trade_gym.sim.terrain import distance_to_path
+from trade_gym.sim.vehicles import matrix_to_quat_xyzw
+from trade_gym.sim.world import World, build_world, make_layout
+
+FOV_DEG = 110.0
+IMAGE_PX = 256
+HARRIS_MIN_CORNERS = 100
+TARGET_BOX_MARGIN_PX = 3
+HUG_TOLERANCE_M = 0.3
+
+
+@pytest.fixture
+def client():
+    cid = p.connect(p.DIRECT)
+    try:
+        yield cid
+    finally:
+        p.disconnect(cid)
+
+
+def _build(cid: int, scene: str, seed: int = 0, **kwargs) -> World:
+    p.resetSimulation(physicsClientId=cid)
+    return build_world(cid, scene, np.random.default_rng(seed), **kwargs)
+
+
+def _render_down(cid: int, world: World) -> tuple[np.ndarray, np.ndarray]:
+    """RGB (H, W, 3) and segmentation (H, W) from drone_start, camera straight down, image up = drone forward."""
+    pos, yaw = world.drone_start()
+    view = p.computeViewMatrix(pos.tolist(), (pos - [0.0, 0.0, 1.0]).tolist(), [np.cos(yaw), np.sin(yaw), 0.0])
+    proj = p.computeProjectionMatrixFOV(FOV_DEG, 1.0, 0.1, 1000.0)
+    _, _, rgb, _, seg = p.getCameraImage(IMAGE_PX, IMAGE_PX, view, proj, renderer=p.ER_TINY_RENDERER,
+                                         physicsClientId=cid)
+    return np.reshape(rgb, (IMAGE_PX, IMAGE_PX, 4))[..., :3].astype(np.uint8), np.reshape(seg, (IMAGE_PX, IMAGE_PX))
+
+
+def _down_camera_rotation(world: World) -> np.ndarray:
+    """R_world_cam of a camera at drone_start looking straight down, image up = drone forward."""
+    _, yaw = world.drone_start()
+    fwd, left = np.array([np.cos(yaw), np.sin(yaw), 0.0]), np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+    return np.column_stack([-left, -fwd, [0.0, 0.0, -1.0]])  # x right, y down (toward the back), z down
+
+
+def _down_camera_points_to_pixels(world: World, points_m: np.ndarray) -> np.ndarray:
+    """Pinhole projection (N, 3) world [m] -> (N, 2) pixels for the straight-down start camera."""
+    pos, _ = world.drone_start()
+    cam = (points_m - pos) @ _down_camera_rotation(world)
+    return CameraIntrinsics.from_fov(IMAGE_PX, IMAGE_PX, FOV_DEG).project(cam)
+
+
+def test_get_scene_unknown_name_raises_value_error_listing_valid_names():
+    with pytest.raises(ValueError, match="desert.*city|city.*desert"):
+        get_scene("moon")
+
+
+def test_scene_spec_negative_altitude_raises_value_error_naming_field():
+    with pytest.raises(ValueError, match="follow_altitude_agl_m"):
+        SceneSpec("x", -1.0, "car", 1.0, 10.0, 50.0, 1.0, "desert_ground", "car", 0, 0, 0)
+
+
+def test_build_world_nonpositive_speed_raises_value_error(client):
+    with pytest.raises(ValueError, match="target_speed_mps"):
+        build_world(client, "desert", np.random.default_rng(0), target_speed_mps=0.0)
+
+
+def test_spline_arc_length_parametrisation_moves_one_metre_per_metre():
+    spline = CatmullRomSpline([[0.0, 0.0], [10.0, 0.0], [20.0, 8.0], [25.0, 30.0]])
+    s = np.linspace(0.0, spline.length_m, 400)
+    step = np.linalg.norm(np.diff(spline.position_m(s), axis=0), axis=1)
+    np.testing.assert_allclose(step, s[1] - s[0], rtol=1e-3)
+    d, _ = spline.closest(np.array([[10.0, 0.0], [20.0, 8.0]]))
+    assert np.all(d < 1e-2)  # passes through its control points
+    np.testing.assert_allclose(CatmullRomSpline([[0.0, 0.0], [0.0, 5.0]]).heading_rad(2.0), np.pi / 2)
+
+
+def test_matrix_to_quat_round_trip_recovers_rotation():
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        R = q * np.sign(np.linalg.det(q))
+        np.testing.assert_allclose(quat_xyzw_to_matrix(matrix_to_quat_xyzw(R)), R, atol=1e-12)
+
+
+@pytest.mark.parametrize("scene", sorted(SCENES))
+def test_ground_height_equals_pybullet_raycast_on_terrain(client, scene):
+    world = _build(client, scene, seed=4)
+    xy = np.random.default_rng(0).uniform(-0.45, 0.45, (400, 2)) * world.spec.terrain_size_m
+    hits = p.rayTestBatch(np.column_stack([xy, np.full(len(xy), 500.0)]).tolist(),
+                          np.column_stack([xy, np.full(len(xy), -500.0)]).tolist(), physicsClientId=client)
+    on_terrain = np.array([h[0] == world.body_ids_by_role["terrain"][0] for h in hits])
+    z = np.array([h[3][2] for h in hits])
+    assert on_terrain.sum() > 300
+    np.testing.assert_allclose(z[on_terrain], world.ground_height_m(xy[on_terrain, 0], xy[on_terrain, 1]), atol=1e-3)
+
+
+def test_desert_decoys_at_least_six_identical_to_target_car(client):
+    world = _build(client, "desert")
+    assert len(world.decoys) >= 6
+    def look(body):  # geometry type, mesh dimensions, colour, texture per visual shape
+        data = p.getVisualShapeData(body, flags=p.VISUAL_SHAPE_DATA_TEXTURE_UNIQUE_IDS, physicsClientId=client)
+        return [(d[2], tuple(d[3]), tuple(d[7]), d[8]) for d in data]
+    for d in world.decoys:
+        assert d.kind == world.target.kind == "car"
+        np.testing.assert_array_equal(d.half_extents_m, world.target.half_extents_m)
+        assert look(d.body_id) == look(world.target.body_id)
+
+
+def test_desert_decoys_include_mover_and_parked_car_within_15_m_of_path(client):
+    world = _build(client, "desert")
+    route = world.target.motion.path
+    parked = [d for d in world.decoys if not d.motion.is_moving]
+    moving = [d for d in world.decoys if d.motion.is_moving]
+    assert moving and parked
+    parked_xy = np.array([world.vehicle_pose(d, 0.0)[0][:2] for d in parked])
+    assert np.min(route.closest(parked_xy)[0]) <= DECOY_NEAR_PATH_M
+    t = np.linspace(0.0, world.duration_s, 60)
+    for d in moving:  # it drives while the target does, and comes near the target's path
+        xy = np.array([world.vehicle_pose(d, ti)[0][:2] for ti in t])
+        assert np.linalg.norm(xy[-1] - xy[0]) > 10.0
+        assert np.min(route.closest(xy)[0]) <= DECOY_NEAR_PATH_M
+
+
+def test_city_takeoff_building_tall_and_roof_fills_part_of_start_view(client):
+    world = _build(client, "city", seed=2)
+    k = world.layout.takeoff_building
+    lo, hi = world.buildings_lo_m[k], world.buildings_hi_m[k]
+    pos, _ = world.drone_start()
+    street = float(world.ground_height_m(*pos[:2]))
+    assert hi[2] - street >= 28.0
+    assert 30.0 <= pos[2] - street <= 34.0 and pos[2] > hi[2]
+    # pinhole: pixel rays from drone_start meet the roof plane inside the roof rectangle for part of the image
+    R_world_cam = _down_camera_rotation(world)
+    u, v = np.meshgrid(np.arange(IMAGE_PX), np.arange(IMAGE_PX))
+    rays = CameraIntrinsics.from_fov(IMAGE_PX, IMAGE_PX, FOV_DEG).rays(np.column_stack([u.ravel(), v.ravel()]))
+    d = rays @ R_world_cam.T
+    hit = pos + d * ((hi[2] - pos[2]) / d[:, 2])[:, None]
+    on_roof = (hit[:, 0] >= lo[0]) & (hit[:, 0] <= hi[0]) & (hit[:, 1] >= lo[1]) & (hit[:, 1] <= hi[1])
+    assert 0.2 < on_roof.mean() < 0.8
+    # the roof edge the drone takes off from projects near the image centre
+    edge = np.clip(pos[:2], lo[:2], hi[:2])
+    border = edge.copy()
+    k_axis = np.argmin(np.minimum(np.abs(edge - lo[:2]), np.abs(hi[:2] - edge)))
+    border[k_axis] = lo[k_axis] if abs(edge[k_axis] - lo[k_axis]) < abs(hi[k_axis] - edge[k_axis]) else hi[k_axis]
+    uv = _down_camera_points_to_pixels(world, np.array([[*border, hi[2]]]))[0]
+    assert np.linalg.norm(uv - (IMAGE_PX - 1) / 2.0) < 0.2 * IMAGE_PX
+
+
+def test_mountain_relief_and_slopes_near_route_over_seeds():
+    spec = get_scene("mountain")
+    for seed in range(4):
+        layout = make_layout(spec, np.random.default_rng(seed), spec.target_speed_mps)
+        m, hf = layout.target, layout.terrain
+        route = m.path.position_m(np.arange(m.start_s_m, m.end_s_m, 1.0))
+        gx, gy = np.meshgrid(hf.x_m, hf.y_m)
+        dist, foot = distance_to_path(hf, m.path, 40.0)
+        near = ((dist <= 40.0) & (foot >= m.start_s_m) & (foot <= m.end_s_m)).ravel()
+        nodes = np.column_stack([gx.ravel(), gy.ravel()])
+        heights = hf.height_m(nodes[near, 0], nodes[near, 1])
+        assert heights.max() - heights.min() >= 40.0, seed
+        assert hf.slope_deg(nodes[near, 0] + 0.1, nodes[near, 1] + 0.2).max() >= 20.0, seed
+        road_h = hf.height_m(route[:, 0], route[:, 1])
+        assert np.max(np.abs(np.diff(road_h))) < 0.2  # the carved road itself stays drivable (< 20 % grade)
+
+
+def test_mountain_route_turns_65_deg_after_about_50_m(client):
+    world = _build(client, "mountain", seed=1)
+    m = world.target.motion
+    heading = m.path.heading_rad(np.arange(m.start_s_m, m.end_s_m, 1.0))
+    turn = np.degrees(np.unwrap(heading) - heading[0])
+    assert abs(abs(turn[-1]) - 65.0) < 3.0
+    first_half_turn = np.argmax(np.abs(turn) > 32.5)
+    assert 40 <= first_half_turn <= 60
+
+
+def test_mountain_lake_is_flat_and_untextured(client):
+    world = _build(client, "mountain", seed=3)
+    lake = world.layout.lake
+    box = lake.centre_m + np.random.default_rng(0).uniform(-1.0, 1.0, (2000, 2)) * lake.semi_axes_m.max()
+    inner = box[lake.normalised_radius(box[:, 0], box[:, 1]) < 0.98]
+    assert len(inner) > 200
+    h = world.ground_height_m(inner[:, 0], inner[:, 1])
+    assert np.ptp(h) < 1e-5 and abs(h[0] - lake.level_m) < 1e-5
+    (lake_body,) = world.body_ids_by_role["lake"]
+    data = p.getVisualShapeData(lake_body, flags=p.VISUAL_SHAPE_DATA_TEXTURE_UNIQUE_IDS, physicsClientId=client)
+    assert all(d[8] == -1 for d in data)  # uniform colour, no texture
+
+
+@pytest.mark.parametrize("scene", sorted(SCENES))
+def test_start_view_has_target_and_100_harris_corners_outside_target_box(client, scene):
+    world = _build(client, scene, seed=5)
+    rgb, seg = _render_down(client, world)
+    target = seg == world.target.body_id
+    assert target.sum() >= 30  # the target is in view at the start
+    ys, xs = np.nonzero(target)
+    gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+    corners = cv2.goodFeaturesToTrack(gray, 500, 0.01, 3, useHarrisDetector=True).reshape(-1, 2)
+    cx, cy = corners[:, 0], corners[:, 1]
+    in_box = (cx >= xs.min() - TARGET_BOX_MARGIN_PX) & (cx <= xs.max() + TARGET_BOX_MARGIN_PX)
+    in_box &= (cy >= ys.min() - TARGET_BOX_MARGIN_PX) & (cy <= ys.max() + TARGET_BOX_MARGIN_PX)
+    lake = np.isin(seg, world.body_ids_by_role["lake"])[np.round(cy).astype(int), np.round(cx).astype(int)]
+    assert np.sum(~in_box & ~lake) >= HARRIS_MIN_CORNERS
+
+
+@pytest.mark.parametrize("scene", sorted(SCENES))
+def test_same_seed_same_world_and_different_seed_different_world(client, scene):
+    def snapshot(seed):
+        world = _build(client, scene, seed)
+        poses = [world.vehicle_pose(v, 7.5) for v in (world.target, *world.decoys)]
+        return world.terrain.heights_m.copy(), np.concatenate([np.concatenate([q, R.ravel()]) for q, R in poses])
+    (h1, v1), (h2, v2), (h3, v3) = snapshot(11), snapshot(11), snapshot(12)
+    np.testing.assert_array_equal(h1, h2)
+    np.testing.assert_array_equal(v1, v2)
+    assert not np.array_equal(h1, h3)
+    assert v1.shape != v3.shape or not np.allclose(v1, v3)
+
+
+@pytest.mark.parametrize("scene", sorted(SCENES))
+def test_target_hugs_terrain_and_body_follows_update(client, scene):
+    world = _build(client, scene, seed=6)
+    hz = world.target.half_extents_m[2]
+    for t in np.linspace(0.0, world.duration_s + 2.0, 12):
+        world.update(t)
+        pos, R = world.vehicle_pose(world.target, t)
+        bottom = pos - hz * R[:, 2]
+        assert abs(bottom[2] - world.ground_height_m(*bottom[:2])) <= HUG_TOLERANCE_M
+        body_pos, body_quat = p.getBasePositionAndOrientation(world.target.body_id, physicsClientId=client)
+        np.testing.assert_allclose(body_pos, pos, atol=1e-6)
+        np.testing.assert_allclose(quat_xyzw_to_matrix(body_quat), R, atol=1e-6)
+
+
+def test_target_moves_at_its_speed_and_stops_at_path_end(client):
+    world = _build(client, "desert", seed=7, target_speed_mps=2.0)
+    m = world.target.motion
+    assert world.duration_s == pytest.approx(m.path.length_m / 2.0)
+    v = world.target_velocity_mps(5.0)
+    assert np.linalg.norm(v[:2]) == pytest.approx(2.0)
+    p0, _ = world.vehicle_pose(world.target, 4.99)
+    p1, _ = world.vehicle_pose(world.target, 5.01)
+    np.testing.assert_allclose((p1 - p0) / 0.02, v, atol=0.15)
+    end, _ = world.vehicle_pose(world.target, world.duration_s)
+    later, _ = world.vehicle_pose(world.target, world.duration_s + 10.0)
+    np.testing.assert_allclose(end, later)
+    np.testing.assert_array_equal(world.target_velocity_mps(world.duration_s + 1.0), 0.0)
+
+
+def test_rays_pass_through_vehicles_but_hit_terrain(client):
+    world = _build(client, "desert", seed=8)
+    pos, _ = world.vehicle_pose(world.target, 0.0)
+    hit = p.rayTest((pos + [0, 0, 20]).tolist(), (pos - [0, 0, 20]).tolist(), physicsClientId=client)[0]
+    assert hit[0] in world.static_body_ids
+    assert hit[0] not in {v.body_id for v in (world.target, *world.decoys)}
+
+
+def test_surface_height_includes_roofs_and_ground_height_excludes_them(client):
+    world = _build(client, "city", seed=0)
+    lo, hi = world.buildings_lo_m, world.buildings_hi_m
+    centre = (lo + hi) / 2.0
+    np.testing.assert_allclose(world.surface_height_m(centre[:, 0], centre[:, 1]), hi[:, 2])
+    assert np.all(world.ground_height_m(centre[:, 0], centre[:, 1]) < hi[:, 2] - 5.0)
+    hit = p.rayTest([*centre[0, :2], 100.0], [*centre[0, :2], -100.0], physicsClientId=client)[0]
+    assert hit[0] in world.body_ids_by_role["buildings"] and hit[3][2] == pytest.approx(hi[0, 2], abs=1e-3)
