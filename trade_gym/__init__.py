@@ -1,0 +1,20 @@
+"""trade-gym: a Gymnasium environment for vision-based UAV target following.
+
+`import trade_gym` registers `TradeFollow-v0`.
+"""
+
+from gymnasium.envs.registration import register, registry
+
+from trade_gym.config import CAMERA_RATE_HZ, EnvConfig
+
+ENV_ID = "TradeFollow-v0"
+DEFAULT_MAX_EPISODE_STEPS = int(EnvConfig().episode_duration_s * CAMERA_RATE_HZ)
+
+if ENV_ID not in registry:
+    register(
+        id=ENV_ID,
+        entry_point="trade_gym.env:TradeFollowEnv",
+        max_episode_steps=DEFAULT_MAX_EPISODE_STEPS,
+    )
+
+__all__ = ["ENV_ID", "EnvConfig"]

@@ -1,0 +1,117 @@
+"""Typed configuration of TradeFollow-v0: every keyword argument of `gym.make`.
+
+One frozen dataclass, validated on construction, so a bad value fails at `gym.make` with
+an error naming the parameter and the value.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+PERCEPTION_MODES = ("trade", "dcf", "oracle")
+POSE_SOURCES = ("gt", "vio")
+RENDER_MODES = (None, "rgb_array")
+SCENE_NAMES = ("desert", "city", "mountain")
+
+PHYSICS_RATE_HZ = 240
+CAMERA_RATE_HZ = 30
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Keyword arguments of `gym.make("TradeFollow-v0", **kwargs)`; see `TradeFollowEnv`."""
+
+    scene: str = "desert"
+    perception: str = "oracle"
+    pose_source: str = "gt"
+    render_mode: str | None = None
+    camera_size: int = 256  # square image side [px]
+    camera_fov_deg: float = 110.0  # vertical = horizontal field of view [deg]
+    camera_pitch_deg: float = 90.0  # optical axis below the body x axis [deg]; 90 = straight down
+    target_speed_mps: float | None = None  # None: the scene's default
+    episode_duration_s: float = 30.0  # truncation horizon [s]
+    lost_timeout_s: float = 3.0  # terminate when the target is out of view this long [s]
+    visible_fraction_threshold: float = 0.25  # target counts as visible above this fraction
+    # Perception ablation switches (perception="trade").
+    temporal_fusion: bool = True
+    ground_mask: bool = False
+    single_image_depth: bool = False
+    trajectory_guidance: bool = True
+    init_box_perturb_px: float = 0.0  # uniform perturbation of the initial box [px]
+    init_frame_shift_max: int = 0  # start tracking after 0..N frames, drawn per episode
+    # Oracle noise model (perception="oracle").
+    oracle_box_sigma_px: float = 1.5
+    oracle_depth_sigma_frac: float = 0.02  # target position noise as a fraction of depth
+    oracle_velocity_sigma_mps: float = 0.2
+    oracle_dropout_prob: float = 0.0  # chance per frame that the estimate is missing
+    imu_noise: bool = True
+    render_oracle_frames: bool = False  # render the camera even in oracle mode (for the GT box)
+
+    def __post_init__(self) -> None:
+        _check_choice("scene", self.scene, SCENE_NAMES)
+        _check_choice("perception", self.perception, PERCEPTION_MODES)
+        _check_choice("pose_source", self.pose_source, POSE_SOURCES)
+        _check_choice("render_mode", self.render_mode, RENDER_MODES)
+        if isinstance(self.camera_size, bool) or not isinstance(self.camera_size, int) or self.camera_size < 16:
+            raise ValueError(f"camera_size must be an integer >= 16 [px], got {self.camera_size!r}")
+        _check_range("camera_fov_deg", self.camera_fov_deg, 10.0, 170.0)
+        _check_range("camera_pitch_deg", self.camera_pitch_deg, 30.0, 90.0)
+        if self.target_speed_mps is not None:
+            _check_positive("target_speed_mps", self.target_speed_mps)
+        for name in ("episode_duration_s", "lost_timeout_s"):
+            _check_positive(name, getattr(self, name))
+        _check_range("visible_fraction_threshold", self.visible_fraction_threshold, 0.0, 1.0)
+        for name in ("init_box_perturb_px", "oracle_box_sigma_px", "oracle_depth_sigma_frac",
+                     "oracle_velocity_sigma_mps"):
+            _check_non_negative(name, getattr(self, name))
+        _check_range("oracle_dropout_prob", self.oracle_dropout_prob, 0.0, 1.0)
+        if not isinstance(self.init_frame_shift_max, int) or self.init_frame_shift_max < 0:
+            raise ValueError(f"init_frame_shift_max must be an integer >= 0, got {self.init_frame_shift_max!r}")
+        for f in fields(self):
+            if f.type == "bool" and not isinstance(getattr(self, f.name), bool):
+                raise ValueError(f"{f.name} must be a bool, got {getattr(self, f.name)!r}")
+
+    @property
+    def physics_steps_per_frame(self) -> int:
+        return PHYSICS_RATE_HZ // CAMERA_RATE_HZ
+
+    @property
+    def frame_dt_s(self) -> float:
+        return 1.0 / CAMERA_RATE_HZ
+
+    @property
+    def max_episode_steps(self) -> int:
+        return int(round(self.episode_duration_s * CAMERA_RATE_HZ))
+
+    @property
+    def needs_rendering(self) -> bool:
+        """Whether a step renders the camera."""
+        return self.perception != "oracle" or self.render_mode is not None or self.render_oracle_frames
+
+
+def _check_choice(name: str, value: object, choices: tuple) -> None:
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {choices}, got {value!r}")
+
+
+def _check_finite_number(name: str, value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _check_positive(name: str, value: object) -> None:
+    if _check_finite_number(name, value) <= 0.0:
+        raise ValueError(f"{name} must be > 0, got {value!r}")
+
+
+def _check_non_negative(name: str, value: object) -> None:
+    if _check_finite_number(name, value) < 0.0:
+        raise ValueError(f"{name} must be >= 0, got {value!r}")
+
+
+def _check_range(name: str, value: object, low: float, high: float) -> None:
+    v = _check_finite_number(name, value)
+    if not low <= v <= high:
+        raise ValueError(f"{name} must be in [{low}, {high}], got {value!r}")

@@ -1,0 +1,315 @@
+"""TradeFollow-v0: follow a ground vehicle from a quadrotor with a downward camera.
+
+The env owns one pybullet client and wires sim -> sensors -> perception -> observation;
+the policy's action flows back as a velocity setpoint.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pybullet as p
+from gymnasium import spaces
+
+from trade.geometry import Pose
+from trade.types import iou
+from trade_gym.annotate import annotate_frame
+from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
+from trade_gym.ground_truth import GroundTruth, VehicleBox, compute_ground_truth
+from trade_gym.observation import build_observation, observation_space
+from trade_gym.perception.base import PerceptionOutput, SensorFrame
+from trade_gym.perception.factory import make_perception
+from trade_gym.reward import RewardConfig, compute_reward
+from trade_gym.sim.camera import Camera, CameraConfig, CameraFrame
+from trade_gym.sim.imu import Imu, ImuConfig
+from trade_gym.sim.pose_source import make_pose_source
+from trade_gym.sim.quadrotor import Quadrotor, QuadrotorConfig
+from trade_gym.sim.world import World, build_world
+
+GRAVITY_MPS2 = 9.81
+ACTION_DIM = 4
+# Rays for the ground-depth truth reach this far beyond the drone's height [m].
+GROUND_RAY_RANGE_M = 1000.0
+
+
+class TradeFollowEnv(gym.Env):
+    """Follow a ground target from a quadrotor, perceiving it with the TRADE stack.
+
+    ## Description
+    A pybullet world (desert, city or mountain; seeded, procedural) holds a target vehicle that
+    drives along a spline, identical decoys, terrain and buildings. A quadrotor carries a
+    body-fixed camera (110 deg FOV, 30 Hz) and an IMU (200 Hz). Each step is one camera frame:
+    the action sets a velocity setpoint for 1/30 s of 240 Hz physics, the camera renders, and the
+    perception mode (`trade`, `dcf` or `oracle`) estimates the target.
+
+    ## Action Space
+    `Box(-1, 1, (4,), float32)`: forward, left and up velocity in the drone's heading frame and
+    yaw rate, scaled by `QuadrotorConfig` limits (8 m/s horizontal, 3 m/s vertical, 1.5 rad/s).
+    Values beyond the bounds act as the bound; a wrong shape or a non-finite value raises
+    `ValueError`.
+
+    ## Observation Space
+    | key | shape | bounds | meaning |
+    |---|---|---|---|
+    | target_pos_rel_m | 3 | +-1000 m | estimated target minus drone position, heading frame |
+    | target_vel_mps | 3 | +-100 m/s | estimated target velocity, heading frame |
+    | drone_vel_mps | 3 | +-100 m/s | drone velocity, heading frame |
+    | bbox_norm | 4 | [0, 1] | estimated box centre and size over the image side (0 if none) |
+    | target_depth_m | 1 | [0, 1000] m | estimated camera-frame depth of the target (0 if none) |
+    | track_valid | 1 | {0, 1} | 1 when this frame brought a fresh box |
+    | time_lost_s | 1 | [0, 3600] s | time since the last fresh box |
+    | imu | 6 | +-16 g, +-2000 deg/s | mean specific force and angular rate over the frame |
+
+    ## Rewards
+    Sum of `visible`, `centering`, `altitude`, `effort` and `crash` (see `trade_gym.reward`); each
+    term is in `info["reward_<term>"]`.
+
+    ## Starting State
+    The drone hovers at the scene's follow height with the target in view; tracking starts from
+    the ground-truth box, optionally shifted by up to `init_frame_shift_max` frames and perturbed by
+    `init_box_perturb_px`.
+
+    ## Episode End
+    Terminated on a crash into terrain or buildings, or when the target has been out of view for
+    `lost_timeout_s`; truncated after `episode_duration_s` (30 s, 900 steps).
+
+    ## Arguments
+    All fields of `trade_gym.config.EnvConfig`, e.g. `scene`, `perception`, `pose_source`,
+    `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches.
+
+    ## Version History
+    - v0: initial release.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
+
+    def __init__(self, **kwargs: Any) -> None:
+        self.config = EnvConfig(**kwargs)
+        self.render_mode = self.config.render_mode
+        self.quad_config = QuadrotorConfig()
+        self.reward_config = RewardConfig()
+        self.camera_config = CameraConfig(
+            width_px=self.config.camera_size,
+            height_px=self.config.camera_size,
+            fov_deg=self.config.camera_fov_deg,
+            pitch_deg=self.config.camera_pitch_deg,
+        )
+        self.imu_config = ImuConfig(enabled=self.config.imu_noise)
+        self.action_space = spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
+        self.observation_space = observation_space()
+        self._action_scale = np.array([
+            self.quad_config.max_speed_horizontal_mps,
+            self.quad_config.max_speed_horizontal_mps,
+            self.quad_config.max_speed_vertical_mps,
+            self.quad_config.max_yaw_rate_radps,
+        ])
+        self._client: int | None = p.connect(p.DIRECT)
+        self.camera = Camera(self._client, self.camera_config)
+        self.quadrotor = Quadrotor(self._client, self.quad_config)
+        self.world: World | None = None
+        self.perception = make_perception(self.config, self.camera.intrinsics, self._true_camera_pose)
+        self._last_frame: CameraFrame | None = None
+        self._last_truth: GroundTruth | None = None
+        self._last_estimate = PerceptionOutput.missing()
+        self._needs_reset = True
+
+    # ----------------------------------------------------------------- gym API
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        cid = self._require_client()
+        p.resetSimulation(physicsClientId=cid)
+        p.setGravity(0.0, 0.0, -GRAVITY_MPS2, physicsClientId=cid)
+        p.setTimeStep(1.0 / PHYSICS_RATE_HZ, physicsClientId=cid)
+        rng = self.np_random
+        self.world = build_world(cid, self.config.scene, rng, self.config.target_speed_mps)
+        start_position, start_yaw = self.world.drone_start()
+        self.quadrotor.spawn(start_position, start_yaw)
+        self.imu = Imu(self.imu_config, rng)
+        self.imu.reset(0.0, rng)
+        self.pose_source = make_pose_source(self.config.pose_source, rng=rng)
+        self._t_s = 0.0
+        self._steps = 0
+        self._distance_flown_m = 0.0
+        self._state = self.quadrotor.read_state()
+        self._time_lost_s = 0.0
+        self._time_target_hidden_s = 0.0
+        self._needs_reset = False
+        # The paper's protocol: the first tracked frame shifts randomly within N frames.
+        shift = int(rng.integers(0, self.config.init_frame_shift_max + 1))
+        for _ in range(shift):
+            self._advance(np.zeros(ACTION_DIM))
+        sensors, truth = self._sense()
+        init_box = self._perturbed_init_box(truth.target_bbox, rng)
+        estimate = self.perception.reset(sensors, init_box, truth, rng)
+        self._last_estimate, self._last_truth = estimate, truth
+        obs = self._observe(estimate, sensors)
+        info = self._info(truth, estimate, crashed=False, terms=None)
+        return obs, info
+
+    def step(self, action):
+        if self._client is None:
+            raise RuntimeError("step() called after close(); create a new env")
+        if self._needs_reset:
+            raise RuntimeError("step() called before reset()")
+        action = self._validate_action(action)
+        crashed = self._advance(action)
+        sensors, truth = self._sense()
+        estimate = self.perception.step(sensors, truth)
+        self._time_lost_s = 0.0 if estimate.valid else self._time_lost_s + self.config.frame_dt_s
+        visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
+        self._time_target_hidden_s = 0.0 if visible else self._time_target_hidden_s + self.config.frame_dt_s
+        self._steps += 1
+        reward, terms = compute_reward(
+            self.reward_config,
+            target_visible=visible,
+            target_pixel=self._target_pixel(truth),
+            image_size_px=self.config.camera_size,
+            height_above_target_m=self._state.position_m[2] - truth.target_position_m[2],
+            nominal_height_m=self.world.spec.follow_altitude_agl_m,
+            action=action,
+            crashed=crashed,
+        )
+        terminated = crashed or self._time_target_hidden_s >= self.config.lost_timeout_s
+        truncated = self._steps >= self.config.max_episode_steps and not terminated
+        self._last_estimate, self._last_truth = estimate, truth
+        obs = self._observe(estimate, sensors)
+        info = self._info(truth, estimate, crashed=crashed, terms=terms)
+        return obs, reward, terminated, truncated, info
+
+    def render(self):
+        if self.render_mode is None:
+            return None
+        if self._last_frame is None:
+            raise RuntimeError("render() needs a reset() first")
+        return annotate_frame(self._last_frame.rgb, self._last_truth, self._last_estimate,
+                              getattr(self.perception, "overlay", None))
+
+    def close(self) -> None:
+        if self._client is not None:
+            try:
+                p.disconnect(physicsClientId=self._client)
+            except p.error:
+                pass
+            self._client = None
+        super().close()
+
+    # --------------------------------------------------------------- internals
+    def _require_client(self) -> int:
+        if self._client is None:
+            raise RuntimeError("reset() called after close(); create a new env")
+        return self._client
+
+    def _validate_action(self, action) -> np.ndarray:
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (ACTION_DIM,):
+            raise ValueError(f"action must have shape ({ACTION_DIM},), got shape {a.shape}: {action!r}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action of shape ({ACTION_DIM},) must be finite, got {a.tolist()}")
+        return np.clip(a, -1.0, 1.0)
+
+    def _advance(self, action: np.ndarray) -> bool:
+        """Run one camera frame of physics under the action; True if the drone crashed."""
+        cid = self._client
+        scaled = action * self._action_scale
+        self.quadrotor.set_setpoint(scaled[:3], scaled[3])
+        dt = 1.0 / PHYSICS_RATE_HZ
+        previous = self._state.position_m
+        for _ in range(self.config.physics_steps_per_frame):
+            self.quadrotor.physics_step(dt)
+            p.stepSimulation(physicsClientId=cid)
+            self._t_s += dt
+            self._state = self.quadrotor.read_state()
+            self.imu.add_truth(self._t_s, self._state.specific_force_body_mps2,
+                               self._state.angular_velocity_body_radps)
+        self._distance_flown_m += float(np.linalg.norm(self._state.position_m - previous))
+        self.world.update(self._t_s)
+        return self.quadrotor.collided(self.world.static_body_ids) or self._below_surface()
+
+    def _below_surface(self) -> bool:
+        x, y, z = self._state.position_m
+        return bool(z < float(self.world.surface_height_m(x, y)))
+
+    def _true_camera_pose(self) -> Pose:
+        return self.camera.pose(self._state.R_world_body, self._state.position_m)
+
+    def _sense(self) -> tuple[SensorFrame, GroundTruth]:
+        T_world_cam = self._true_camera_pose()
+        frame = self.camera.render(T_world_cam) if self.config.needs_rendering else None
+        self._last_frame = frame
+        target_box = self._vehicle_box(self.world.target)
+        decoys = [self._vehicle_box(d) for d in self.world.decoys]
+        truth = compute_ground_truth(
+            self._client,
+            self.camera.intrinsics,
+            T_world_cam,
+            target_box,
+            self.world.target_velocity_mps(self._t_s),
+            decoys,
+            None if frame is None else frame.seg,
+            self.world.target.body_id,
+            [d.body_id for d in self.world.decoys],
+            max_range_m=self._state.position_m[2] + GROUND_RAY_RANGE_M,
+        )
+        T_est = self.pose_source.estimate(T_world_cam, self._distance_flown_m)
+        sensors = SensorFrame(self._t_s, None if frame is None else frame.rgb, T_est, self.imu.read())
+        return sensors, truth
+
+    def _vehicle_box(self, vehicle) -> VehicleBox:
+        position, R = self.world.vehicle_pose(vehicle, self._t_s)
+        return VehicleBox(position, R, np.asarray(vehicle.half_extents_m, dtype=np.float64))
+
+    def _perturbed_init_box(self, box: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        jitter = self.config.init_box_perturb_px
+        if jitter <= 0.0 or not np.all(np.isfinite(box)):
+            return box
+        return box + np.concatenate([rng.uniform(-jitter, jitter, 2), np.zeros(2)])
+
+    def _observe(self, estimate: PerceptionOutput, sensors: SensorFrame) -> dict[str, np.ndarray]:
+        T_world_body_est = sensors.T_world_cam.compose(self.camera.T_body_cam.inverse())
+        forward = T_world_body_est.R[:, 0]
+        yaw_est = float(np.arctan2(forward[1], forward[0]))
+        return build_observation(
+            estimate,
+            drone_position_est_m=T_world_body_est.t,
+            drone_yaw_est_rad=yaw_est,
+            drone_velocity_world_mps=self._state.velocity_mps,
+            imu=sensors.imu,
+            time_lost_s=self._time_lost_s,
+            image_size_px=self.config.camera_size,
+        )
+
+    def _target_pixel(self, truth: GroundTruth) -> np.ndarray:
+        T_cam_world = self._true_camera_pose().inverse()
+        return self.camera.intrinsics.project(T_cam_world.apply(truth.target_position_m.reshape(1, 3)))[0]
+
+    def _info(self, truth: GroundTruth, estimate: PerceptionOutput, crashed: bool,
+              terms: dict[str, float] | None) -> dict[str, Any]:
+        est_iou = iou(truth.target_bbox, estimate.bbox)
+        decoy_ious = [iou(d, estimate.bbox) for d in truth.decoy_bboxes]
+        best_decoy = max(decoy_ious, default=0.0)
+        drone = self._state.position_m
+        info: dict[str, Any] = {
+            "t_s": self._t_s,
+            "gt_bbox": truth.target_bbox.copy(),
+            "est_bbox": estimate.bbox.copy(),
+            "iou": est_iou,
+            "target_visible": truth.target_visible_fraction >= self.config.visible_fraction_threshold,
+            "target_visible_fraction": truth.target_visible_fraction,
+            "on_decoy": bool(best_decoy > est_iou and best_decoy > 0.0),
+            "target_depth_gt": truth.target_depth_m,
+            "target_depth_est": estimate.target_depth_m,
+            "ground_depth_gt": truth.ground_depth_m,
+            "ground_depth_est": estimate.ground_depth_m,
+            "est_valid": estimate.valid,
+            "crashed": crashed,
+            "drone_position_m": drone.copy(),
+            "target_position_m": truth.target_position_m.copy(),
+            "horizontal_distance_m": float(np.linalg.norm(truth.target_position_m[:2] - drone[:2])),
+            # Only the decoys in view, so the array holds no NaN rows: (k, 4) [px].
+            "decoy_bboxes": truth.decoy_bboxes[np.all(np.isfinite(truth.decoy_bboxes), axis=1)].copy(),
+        }
+        for name, value in (terms or {}).items():
+            info[f"reward_{name}"] = value
+        return info

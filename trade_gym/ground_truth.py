@@ -1,0 +1,174 @@
+"""Ground truth for scoring: target and decoy boxes, visibility and depths at one frame.
+
+Boxes come from the segmentation mask (visible pixels) when a frame was rendered, else from
+the projection of each vehicle's 3D box; visibility always from rays to sample points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pybullet as p
+
+from trade.geometry import CameraIntrinsics, Pose
+
+FloatArray = npt.NDArray[np.float64]
+
+# Target visibility is measured on a grid of points inside the vehicle's box, shrunk
+# slightly so the points sit just inside its surfaces.
+VISIBILITY_GRID_STEPS = 3
+VISIBILITY_SHRINK = 0.9
+# A ray that gets this close to its end point without hitting anything static is clear.
+RAY_CLEAR_FRACTION = 0.999
+# pybullet's rayTest has a practical range; rays longer than this are not cast.
+MAX_RAY_LENGTH_M = 2000.0
+
+_UNIT_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64)
+_grid = np.linspace(-1.0, 1.0, VISIBILITY_GRID_STEPS)
+_UNIT_GRID = np.array([[x, y, z] for x in _grid for y in _grid for z in _grid]) * VISIBILITY_SHRINK
+
+
+@dataclass(frozen=True)
+class VehicleBox:
+    """A vehicle's oriented 3D box: centre (3,) world [m], R_world_vehicle (3, 3), half extents (3,) [m]."""
+
+    center_m: FloatArray
+    R_world_vehicle: FloatArray
+    half_extents_m: FloatArray
+
+    def points(self, unit: FloatArray) -> FloatArray:
+        """Points given in box-normalised coordinates (N, 3) in [-1, 1] -> world (N, 3) [m]."""
+        return (unit * self.half_extents_m) @ self.R_world_vehicle.T + self.center_m
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """Ground truth at one frame; boxes (x, y, w, h) [px] with NaN where not in view."""
+
+    target_bbox: FloatArray
+    decoy_bboxes: FloatArray  # (D, 4)
+    target_visible_fraction: float
+    target_position_m: FloatArray  # (3,) world, centre of the target's box
+    target_velocity_mps: FloatArray  # (3,) world
+    target_depth_m: float  # camera-frame z of the target's centre
+    ground_depth_m: float  # camera-frame z of the static surface under the box centre's ray
+    ground_point_m: FloatArray  # (3,) world point of that surface hit, NaN if none
+
+
+def projected_boxes(K: CameraIntrinsics, T_cam_world: Pose, boxes: list[VehicleBox]) -> FloatArray:
+    """(B, 4) image boxes (x, y, w, h) of the vehicles' projected 3D corners, clipped to the image;
+    NaN rows for boxes out of view or with a corner behind the camera. One vectorised projection."""
+    if not boxes:
+        return np.zeros((0, 4))
+    corners = np.concatenate([b.points(_UNIT_CORNERS) for b in boxes])  # (8B, 3)
+    cam = corners @ T_cam_world.R.T + T_cam_world.t
+    z = cam[:, 2].reshape(-1, 8)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = (K.fx_px * cam[:, 0] / cam[:, 2] + K.cx_px).reshape(-1, 8)
+        v = (K.fy_px * cam[:, 1] / cam[:, 2] + K.cy_px).reshape(-1, 8)
+    x0 = np.maximum(u.min(axis=1), -0.5)
+    y0 = np.maximum(v.min(axis=1), -0.5)
+    x1 = np.minimum(u.max(axis=1), K.width_px - 0.5)
+    y1 = np.minimum(v.max(axis=1), K.height_px - 0.5)
+    out = np.stack([x0, y0, x1 - x0, y1 - y0], axis=1)
+    out[(z <= 0.0).any(axis=1) | (x1 <= x0) | (y1 <= y0)] = np.nan
+    return out
+
+
+def segmentation_boxes(seg: npt.NDArray[np.int32], body_ids: npt.ArrayLike) -> FloatArray:
+    """Tight (x, y, w, h) boxes of each body's visible pixels in a segmentation mask; NaN if absent."""
+    ids = np.asarray(body_ids, dtype=np.int64)
+    boxes = np.full((len(ids), 4), np.nan)
+    # One pass over the mask: for each requested id, its pixel rows and columns.
+    lookup = {int(b): i for i, b in enumerate(ids)}
+    present = np.isin(seg, ids)
+    if not present.any():
+        return boxes
+    rows, cols = np.nonzero(present)
+    labels = seg[rows, cols]
+    for body, i in lookup.items():
+        sel = labels == body
+        if sel.any():
+            r, c = rows[sel], cols[sel]
+            boxes[i] = (c.min() - 0.5, r.min() - 0.5, c.max() - c.min() + 1.0, r.max() - r.min() + 1.0)
+    return boxes
+
+
+def visible_fraction(
+    client_id: int, K: CameraIntrinsics, T_world_cam: Pose, box: VehicleBox
+) -> float:
+    """Fraction of sample points inside the target's box that are in the image and not hidden by
+    terrain or buildings (vehicles carry no collision shape, so rays pass through them)."""
+    pts = box.points(_UNIT_GRID)
+    uv = K.project(T_world_cam.inverse().apply(pts))
+    in_image = (
+        np.isfinite(uv[:, 0])
+        & (uv[:, 0] >= -0.5) & (uv[:, 0] <= K.width_px - 0.5)
+        & (uv[:, 1] >= -0.5) & (uv[:, 1] <= K.height_px - 0.5)
+    )
+    if not in_image.any():
+        return 0.0
+    origin = T_world_cam.t
+    targets = pts[in_image]
+    hits = p.rayTestBatch(
+        [origin.tolist()] * len(targets), targets.tolist(), physicsClientId=client_id
+    )
+    clear = sum(1 for h in hits if h[0] < 0 or h[2] >= RAY_CLEAR_FRACTION)
+    return clear / len(pts)
+
+
+def ground_hit(
+    client_id: int, K: CameraIntrinsics, T_world_cam: Pose, pixel: FloatArray, max_range_m: float
+) -> tuple[float, FloatArray]:
+    """Cast the pixel's ray against static geometry: (camera-frame z [m], world point), NaN if none."""
+    if not np.all(np.isfinite(pixel)):
+        return float("nan"), np.full(3, np.nan)
+    ray_cam = K.rays(pixel.reshape(1, 2))[0]
+    direction = T_world_cam.R @ (ray_cam / np.linalg.norm(ray_cam))
+    length = min(max_range_m, MAX_RAY_LENGTH_M)
+    start = T_world_cam.t
+    end = start + direction * length
+    hit = p.rayTest(start.tolist(), end.tolist(), physicsClientId=client_id)[0]
+    if hit[0] < 0:
+        return float("nan"), np.full(3, np.nan)
+    point = np.asarray(hit[3], dtype=np.float64)
+    depth = float((T_world_cam.R.T @ (point - start))[2])
+    return depth, point
+
+
+def compute_ground_truth(
+    client_id: int,
+    K: CameraIntrinsics,
+    T_world_cam: Pose,
+    target: VehicleBox,
+    target_velocity_mps: FloatArray,
+    decoys: list[VehicleBox],
+    seg: npt.NDArray[np.int32] | None,
+    target_body_id: int,
+    decoy_body_ids: list[int],
+    max_range_m: float,
+) -> GroundTruth:
+    """All ground truth of one frame; `seg` is the rendered mask or None (projected boxes)."""
+    T_cam_world = T_world_cam.inverse()
+    if seg is not None:
+        boxes = segmentation_boxes(seg, [target_body_id, *decoy_body_ids])
+        target_bbox, decoy_bboxes = boxes[0], boxes[1:]
+    else:
+        boxes = projected_boxes(K, T_cam_world, [target, *decoys])
+        target_bbox, decoy_bboxes = boxes[0], boxes[1:]
+    target_depth = float(T_cam_world.apply(target.center_m.reshape(1, 3))[0, 2])
+    fraction = visible_fraction(client_id, K, T_world_cam, target)
+    centre = target_bbox[:2] + target_bbox[2:] / 2.0
+    ground_depth, ground_point = ground_hit(client_id, K, T_world_cam, centre, max_range_m)
+    return GroundTruth(
+        target_bbox=target_bbox,
+        decoy_bboxes=decoy_bboxes,
+        target_visible_fraction=fraction,
+        target_position_m=target.center_m.copy(),
+        target_velocity_mps=np.asarray(target_velocity_mps, dtype=np.float64),
+        target_depth_m=target_depth,
+        ground_depth_m=ground_depth,
+        ground_point_m=ground_point,
+    )

@@ -1,0 +1,100 @@
+"""Oracle perception: ground truth passed through a noise model, with no image processing.
+
+The target is measured in the true camera frame and mapped to the world with the pose
+source's estimate, so VIO drift reaches the oracle's estimates the way it reaches TRADE's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from trade.geometry import Pose
+from trade_gym.ground_truth import GroundTruth
+from trade_gym.perception.base import FloatArray, PerceptionOutput, SensorFrame
+
+MIN_BOX_SIDE_PX = 1.0
+
+
+@dataclass(frozen=True)
+class OracleConfig:
+    """Noise model: Gaussian box jitter [px], position noise as a fraction of depth, velocity
+    noise [m/s], and a per-frame dropout probability (the estimate then coasts)."""
+
+    box_sigma_px: float = 1.5
+    depth_sigma_frac: float = 0.02
+    velocity_sigma_mps: float = 0.2
+    dropout_prob: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("box_sigma_px", "depth_sigma_frac", "velocity_sigma_mps"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"OracleConfig.{name} must be finite and >= 0, got {value!r}")
+        if not 0.0 <= self.dropout_prob <= 1.0:
+            raise ValueError(f"OracleConfig.dropout_prob must be in [0, 1], got {self.dropout_prob!r}")
+
+
+class OraclePerception:
+    """Ground truth plus noise; needs no rendered image."""
+
+    def __init__(self, config: OracleConfig, T_world_cam_true: Callable[[], Pose]) -> None:
+        self.config = config
+        self._true_pose = T_world_cam_true  # the camera's true pose now
+        self._rng = np.random.default_rng(0)
+        self._last = PerceptionOutput.missing()
+
+    def reset(self, sensors: SensorFrame, init_box: FloatArray, truth: GroundTruth,
+              rng: np.random.Generator) -> PerceptionOutput:
+        self._rng = rng
+        self._last = PerceptionOutput.missing()
+        return self.step(sensors, truth)
+
+    def step(self, sensors: SensorFrame, truth: GroundTruth) -> PerceptionOutput:
+        cfg = self.config
+        # Draw every noise term each frame so the random stream does not depend on visibility.
+        box_noise = self._rng.normal(0.0, cfg.box_sigma_px, 4)
+        pos_noise = self._rng.normal(0.0, 1.0, 3)
+        vel_noise = self._rng.normal(0.0, cfg.velocity_sigma_mps, 3)
+        ground_noise = self._rng.normal(0.0, 1.0)
+        dropped = self._rng.random() < cfg.dropout_prob
+        if dropped or not np.all(np.isfinite(truth.target_bbox)):
+            self._last = _coast(self._last)
+            return self._last
+        bbox = truth.target_bbox + box_noise
+        bbox[2:] = np.maximum(bbox[2:], MIN_BOX_SIDE_PX)
+        T_cam_world_true = self._true_pose().inverse()
+        target_cam = T_cam_world_true.apply(truth.target_position_m.reshape(1, 3))[0]
+        depth_sigma = cfg.depth_sigma_frac * max(target_cam[2], 0.0)
+        target_cam = target_cam + pos_noise * depth_sigma
+        position = sensors.T_world_cam.apply(target_cam.reshape(1, 3))[0]
+        # Velocity rotates with the estimated orientation error, as a measured vector would.
+        R_err = sensors.T_world_cam.R @ T_cam_world_true.R
+        velocity = R_err @ truth.target_velocity_mps + vel_noise
+        ground = truth.ground_depth_m * (1.0 + cfg.depth_sigma_frac * ground_noise)
+        self._last = PerceptionOutput(
+            bbox=bbox,
+            position_world_m=position,
+            velocity_world_mps=velocity,
+            target_depth_m=float(target_cam[2]),
+            target_depth_sigma_m=float(depth_sigma),
+            ground_depth_m=float(ground),
+            valid=True,
+        )
+        return self._last
+
+
+def _coast(last: PerceptionOutput) -> PerceptionOutput:
+    """Keep the last world estimate but report no fresh box."""
+    return PerceptionOutput(
+        bbox=np.full(4, np.nan),
+        position_world_m=last.position_world_m,
+        velocity_world_mps=last.velocity_world_mps,
+        target_depth_m=np.nan,
+        target_depth_sigma_m=np.nan,
+        ground_depth_m=np.nan,
+        valid=False,
+    )
+

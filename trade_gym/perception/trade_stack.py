@@ -1,0 +1,125 @@
+"""The TRADE stack (`perception="trade"`) and its baseline (`"dcf"`) as env perception modes.
+
+Runs `trade.TradePipeline` on the rendered frames with the pose source's camera pose; the
+ground-truth box is used only to initialise the tracker at reset (as the paper's protocol does).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from trade.geometry import CameraIntrinsics
+from trade.pipeline import Estimate, PipelineConfig, TradePipeline
+from trade.raycast import raycast_plane
+from trade.types import BBox
+from trade_gym.config import EnvConfig
+from trade_gym.ground_truth import GroundTruth
+from trade_gym.perception.base import FloatArray, PerceptionOutput, SensorFrame
+
+TRAJECTORY_COLOUR_RGB = (255, 0, 255)  # magenta, as in the paper's figures
+INLIER_COLOUR_RGB = (255, 255, 0)
+FEATURE_DEPTH_RANGE_M = (5.0, 60.0)  # colour map range for ROI feature depths
+POINT_RADIUS_PX = 1
+INLIER_RADIUS_PX = 3
+PLANE_INLIER_DRAW_M = 0.5  # the MSAC inlier threshold
+
+
+def pipeline_config(config: EnvConfig) -> PipelineConfig:
+    """The stack's configuration for an env configuration (its ablation switches)."""
+    return PipelineConfig(
+        trajectory_guidance=config.trajectory_guidance and config.perception == "trade",
+        temporal_fusion=config.temporal_fusion,
+        ground_mask=config.ground_mask,
+        single_image_depth=config.single_image_depth,
+    )
+
+
+class TradePerception:
+    """Adapter from the env's sensors to `TradePipeline` and back to `PerceptionOutput`."""
+
+    def __init__(self, config: EnvConfig, intrinsics: CameraIntrinsics) -> None:
+        self.pipeline_config = pipeline_config(config)
+        self.intrinsics = intrinsics
+        self.pipeline: TradePipeline | None = None
+        self.last: Estimate | None = None
+        self._T_world_cam = None
+
+    def reset(self, sensors: SensorFrame, init_box: FloatArray, truth: GroundTruth,
+              rng: np.random.Generator) -> PerceptionOutput:
+        if sensors.rgb is None:
+            raise RuntimeError("the trade perception needs rendered frames")
+        if not np.all(np.isfinite(init_box)):
+            raise RuntimeError("the target is not in view at reset; cannot initialise the tracker")
+        self.pipeline = TradePipeline(self.pipeline_config, self.intrinsics, rng)
+        self.last = self.pipeline.initialise(sensors.rgb, BBox.from_array(init_box), sensors.T_world_cam,
+                                             sensors.t_s)
+        self._T_world_cam = sensors.T_world_cam
+        return self._output(self.last, truth, sensors)
+
+    def step(self, sensors: SensorFrame, truth: GroundTruth) -> PerceptionOutput:
+        self.last = self.pipeline.step(sensors.rgb, sensors.T_world_cam, sensors.t_s, sensors.imu)
+        self._T_world_cam = sensors.T_world_cam
+        return self._output(self.last, truth, sensors)
+
+    def _output(self, est: Estimate, truth: GroundTruth, sensors: SensorFrame) -> PerceptionOutput:
+        bbox = est.box.as_array() if est.box is not None else np.full(4, np.nan)
+        return PerceptionOutput(
+            bbox=bbox,
+            position_world_m=est.position_world_m,
+            velocity_world_mps=est.velocity_world_mps,
+            target_depth_m=est.depth_m,
+            target_depth_sigma_m=est.depth_sigma_m,
+            ground_depth_m=self._ground_depth(est, truth, sensors),
+            valid=est.tracked and est.box is not None,
+        )
+
+    def _ground_depth(self, est: Estimate, truth: GroundTruth, sensors: SensorFrame) -> float:
+        """Depth of the estimated ground plane along the ground-truth box centre's ray (the paper's
+        Table 1 quantity: plane quality independent of tracking errors)."""
+        if est.plane is None or not np.all(np.isfinite(truth.target_bbox)):
+            return float("nan")
+        centre = truth.target_bbox[:2] + truth.target_bbox[2:] / 2.0
+        hit = raycast_plane(self.intrinsics, sensors.T_world_cam, centre, est.plane, 0.0)
+        return hit.depth_m if hit.valid else float("nan")
+
+    @property
+    def overlay(self) -> TradeOverlay | None:
+        if self.last is None or self._T_world_cam is None:
+            return None
+        return TradeOverlay(self.last, self.intrinsics, self._T_world_cam)
+
+
+class TradeOverlay:
+    """Draws what the paper's figures show: predicted trajectory (magenta), ROI features coloured
+    by depth, plane inliers circled."""
+
+    def __init__(self, est: Estimate, intrinsics: CameraIntrinsics, T_world_cam) -> None:
+        self.est, self.K, self.T_world_cam = est, intrinsics, T_world_cam
+
+    def draw(self, image: npt.NDArray[np.uint8]) -> None:
+        est = self.est
+        if est.roi is not None and len(est.roi.pixels):
+            self._draw_features(image)
+        if len(est.trajectory_preview_world_m):
+            uv = self.K.project(self.T_world_cam.inverse().apply(est.trajectory_preview_world_m))
+            uv = uv[np.all(np.isfinite(uv), axis=1)]
+            if len(uv) >= 2:
+                cv2.polylines(image, [np.round(uv).astype(np.int32)], False, TRAJECTORY_COLOUR_RGB, 1)
+
+    def _draw_features(self, image: npt.NDArray[np.uint8]) -> None:
+        roi, plane = self.est.roi, self.est.plane
+        lo, hi = FEATURE_DEPTH_RANGE_M
+        depth = np.nan_to_num(roi.depth_m, nan=hi)
+        level = np.clip((depth - lo) / (hi - lo) * 255.0, 0, 255).astype(np.uint8)
+        colours = cv2.applyColorMap(level.reshape(-1, 1), cv2.COLORMAP_JET).reshape(-1, 3)[:, ::-1]
+        inlier = np.zeros(len(roi.pixels), bool)
+        if plane is not None:
+            finite = np.all(np.isfinite(roi.points_world), axis=1) & roi.promoted
+            inlier[finite] = np.abs(plane.signed_distance(roi.points_world[finite])) <= PLANE_INLIER_DRAW_M
+        for (u, v), colour, is_inlier in zip(np.round(roi.pixels).astype(int), colours, inlier):
+            cv2.circle(image, (int(u), int(v)), POINT_RADIUS_PX, tuple(int(c) for c in colour), -1)
+            if is_inlier:
+                cv2.circle(image, (int(u), int(v)), INLIER_RADIUS_PX, INLIER_COLOUR_RGB, 1)
+
