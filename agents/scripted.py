@@ -21,6 +21,7 @@ class ScriptedFollowerConfig:
     """Gains [1/s], feed-forward fraction, camera pitch [deg] and the env's action scale."""
 
     position_gain_per_s: float = 0.8
+    image_gain_mps: float = 6.0  # before a 3D estimate exists: speed per half-image offset of the box
     height_gain_per_s: float = 0.6
     velocity_feedforward: float = 1.0
     camera_pitch_deg: float = 90.0
@@ -28,7 +29,7 @@ class ScriptedFollowerConfig:
     max_speed_vertical_mps: float = DEFAULT_MAX_SPEED_VERTICAL_MPS
 
     def __post_init__(self) -> None:
-        for name in ("position_gain_per_s", "height_gain_per_s", "max_speed_horizontal_mps",
+        for name in ("position_gain_per_s", "height_gain_per_s", "image_gain_mps", "max_speed_horizontal_mps",
                      "max_speed_vertical_mps"):
             value = getattr(self, name)
             if not np.isfinite(value) or value <= 0:
@@ -58,6 +59,7 @@ class ScriptedFollower:
         batched = rel.ndim == 2
         rel = rel.reshape(-1, 3)
         vel = np.asarray(observation["target_vel_mps"], dtype=np.float64).reshape(-1, 3)
+        bbox = np.asarray(observation["bbox_norm"], dtype=np.float64).reshape(-1, 4)
         valid_ever = np.any(rel != 0.0, axis=1)
         height = -rel[:, 2]  # drone height above the target [m]
         n = len(rel)
@@ -69,13 +71,31 @@ class ScriptedFollower:
         # The first valid estimate of an episode fixes the height to hold.
         unset = np.isnan(self._hold_height_m) & valid_ever
         self._hold_height_m = np.where(unset, height, self._hold_height_m)
-        action = np.stack([self._act(rel[i], vel[i], self._hold_height_m[i], valid_ever[i])
-                           for i in range(len(rel))]).astype(np.float32)
+        action = np.stack([
+            self._act(rel[i], vel[i], self._hold_height_m[i]) if valid_ever[i] else self._servo_image(bbox[i])
+            for i in range(len(rel))
+        ]).astype(np.float32)
         return (action if batched else action[0]), state
 
-    def _act(self, rel: np.ndarray, vel: np.ndarray, hold_height_m: float, valid: bool) -> np.ndarray:
+    def _servo_image(self, bbox_norm: np.ndarray) -> np.ndarray:
+        """No 3D estimate yet (e.g. before the ROI depths converge): centre the box in the image.
+        Image right is the drone's right, image up its forward direction; this motion also gives
+        the feature triangulation its baseline."""
         cfg = self.config
-        if not valid or not np.isfinite(hold_height_m):
+        if not np.any(bbox_norm):
+            return np.zeros(4)
+        offset = 2.0 * (bbox_norm[:2] - 0.5)  # (right, down) in half-image units
+        v_forward, v_left = -cfg.image_gain_mps * offset[1], -cfg.image_gain_mps * offset[0]
+        return np.array([
+            np.clip(v_forward / cfg.max_speed_horizontal_mps, -1.0, 1.0),
+            np.clip(v_left / cfg.max_speed_horizontal_mps, -1.0, 1.0),
+            0.0,
+            0.0,
+        ])
+
+    def _act(self, rel: np.ndarray, vel: np.ndarray, hold_height_m: float) -> np.ndarray:
+        cfg = self.config
+        if not np.isfinite(hold_height_m):
             return np.zeros(4)
         # Desired horizontal offset: the target sits on the optical axis at the held height.
         ahead_m = hold_height_m / np.tan(np.radians(cfg.camera_pitch_deg))
