@@ -43,9 +43,22 @@ def test_scripted_follower_batch_and_single_agree():
     obs = {
         "target_pos_rel_m": np.array([3.0, -2.0, -16.0], np.float32),
         "target_vel_mps": np.array([2.0, 0.5, 0.0], np.float32),
+        "bbox_norm": np.array([0.6, 0.4, 0.05, 0.1], np.float32),
     }
     single, _ = policy_a.predict(obs, episode_start=np.array([True]))
     batch, _ = policy_b.predict({k: v[None] for k, v in obs.items()}, episode_start=np.array([True]))
     assert single.shape == (4,) and batch.shape == (1, 4)
     np.testing.assert_array_equal(single, batch[0])
     assert single[0] > 0 and single[1] < 0  # moves towards the target: forward and right
+
+
+def test_scripted_follower_without_3d_estimate_servos_towards_the_box():
+    policy = ScriptedFollower()
+    obs = {
+        "target_pos_rel_m": np.zeros(3, np.float32),
+        "target_vel_mps": np.zeros(3, np.float32),
+        "bbox_norm": np.array([0.8, 0.3, 0.05, 0.1], np.float32),  # right of and above the centre
+    }
+    action, _ = policy.predict(obs, episode_start=np.array([True]))
+    assert action[0] > 0 and action[1] < 0  # forward (image up) and right (image right)
+    assert action[2] == 0 and action[3] == 0

@@ -8,10 +8,12 @@ import pybullet as p
 import pytest
 
 from trade.geometry import CameraIntrinsics, quat_xyzw_to_matrix
+from trade_gym.sim.bullet_lists import bullet_list
+from trade_gym.sim.meshes import rock_mesh
 from trade_gym.sim.scenes import DECOY_NEAR_PATH_M, SCENES, SceneSpec, get_scene
 from trade_gym.sim.spline import CatmullRomSpline
 from trade_gym.sim.terrain import distance_to_path
-from trade_gym.sim.vehicles import matrix_to_quat_xyzw
+from trade_gym.sim.vehicles import matrix_to_quat_xyzw, terrain_pose
 from trade_gym.sim.world import World, build_world, make_layout
 
 FOV_DEG = 110.0
@@ -270,3 +272,86 @@ def test_surface_height_includes_roofs_and_ground_height_excludes_them(client):
     assert np.all(world.ground_height_m(centre[:, 0], centre[:, 1]) < hi[:, 2] - 5.0)
     hit = p.rayTest([*centre[0, :2], 100.0], [*centre[0, :2], -100.0], physicsClientId=client)[0]
     assert hit[0] in world.body_ids_by_role["buildings"] and hit[3][2] == pytest.approx(hi[0, 2], abs=1e-3)
+
+
+def test_vehicle_pose_same_whether_or_not_update_ran_for_that_time(client):
+    world = _build(client, "desert", seed=9)
+    vehicles = (world.target, *world.decoys)
+    times = np.linspace(0.1, world.duration_s + 1.0, 9)
+    cached = []
+    for t in times:
+        on_demand = [world.vehicle_pose(v, t) for v in vehicles]  # before update(t): computed, not cached
+        world.update(t)
+        cached.append([world.vehicle_pose(v, t) for v in vehicles])
+        for (p0, R0), (p1, R1) in zip(on_demand, cached[-1]):
+            np.testing.assert_array_equal(p0, p1)
+            np.testing.assert_array_equal(R0, R1)
+    for t, poses in zip(times, cached):  # earlier times after later updates, and the vectorised reference
+        for v, (pos, R) in zip(vehicles, poses):
+            again = world.vehicle_pose(v, t)
+            np.testing.assert_array_equal(again[0], pos)
+            np.testing.assert_array_equal(again[1], R)
+            s = v.motion.distance_m(t)
+            ref_pos, ref_R = terrain_pose(world.terrain, v.motion.path.position_m(s)[None],
+                                          v.motion.path.heading_rad(s), v.half_extents_m)
+            np.testing.assert_allclose(pos, ref_pos[0], atol=1e-12)
+            np.testing.assert_allclose(R, ref_R[0], atol=1e-12)
+    with pytest.raises(ValueError):  # read-only: a caller cannot corrupt the cache
+        cached[-1][0][0][0] = 0.0
+
+
+def test_scalar_height_queries_equal_vectorised_ones_including_roof_edges(client):
+    world = _build(client, "city", seed=1)
+    lo, hi = world.buildings_lo_m, world.buildings_hi_m
+    rng = np.random.default_rng(2)
+    edges = np.concatenate([lo[:, :2], hi[:, :2], np.column_stack([lo[:, 0], hi[:, 1]]),
+                            np.nextafter(hi[:, :2], np.inf), np.nextafter(lo[:, :2], -np.inf)])
+    xy = np.concatenate([edges, rng.uniform(-0.55, 0.55, (2000, 2)) * world.spec.terrain_size_m])
+    scalar = np.array([world.surface_height_m(np.float64(x), np.float64(y)) for x, y in xy])
+    np.testing.assert_array_equal(scalar, world.surface_height_m(xy[:, 0], xy[:, 1]))
+    assert np.sum(scalar > world.ground_height_m(xy[:, 0], xy[:, 1]) + 1.0) > len(lo)  # roofs were found
+    ground = np.array([world.ground_height_m(float(x), float(y)) for x, y in xy])
+    np.testing.assert_array_equal(ground, world.ground_height_m(xy[:, 0], xy[:, 1]))
+    gradient = np.array([world.terrain.gradient_at(x, y) for x, y in xy.tolist()])
+    np.testing.assert_array_equal(gradient, world.terrain.gradient(xy[:, 0], xy[:, 1]))
+    path = world.target.motion.path
+    s = np.concatenate([[-1.0, 0.0, path.length_m, path.length_m + 1.0], rng.uniform(0.0, path.length_m, 200)])
+    np.testing.assert_array_equal([path.point_at(si) for si in s.tolist()],
+                                  np.column_stack([path.position_m(s), path.tangent(s)]))
+
+
+def test_desert_boulders_are_one_static_body_hit_by_rays_and_contacts(client):
+    world = _build(client, "desert", seed=2)
+    (rocks,) = world.body_ids_by_role["boulders"]
+    assert len(world.layout.boulders) == world.spec.boulder_count > 1 and rocks in world.static_body_ids
+    assert p.getNumBodies(physicsClientId=client) == len(world.static_body_ids) + 1 + len(world.decoys)
+    # a vertical ray through each boulder centre meets the rock body at (or above, where rocks overlap) the
+    # top vertex of that boulder's mesh, which sits on its vertical axis
+    tops = []
+    for b in world.layout.boulders:
+        v = rock_mesh(b.prototype, b.size_class).vertices
+        tops.append(b.centre_m[2] + v[np.argmin(np.hypot(v[:, 0], v[:, 1]) - v[:, 2])][2])
+    centres = np.array([b.centre_m for b in world.layout.boulders])
+    hits = p.rayTestBatch((centres + [0.0, 0.0, 50.0]).tolist(), (centres - [0.0, 0.0, 50.0]).tolist(),
+                          physicsClientId=client)
+    assert all(h[0] == rocks for h in hits)
+    assert np.all(np.array([h[3][2] for h in hits]) >= np.array(tops) - 1e-4)
+    # a dynamic box dropped on the largest boulder touches the rock body, as crash checks need
+    k = int(np.argmax([b.radii_m[2] for b in world.layout.boulders]))
+    shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.2, 0.2, 0.05], physicsClientId=client)
+    box = p.createMultiBody(1.5, shape, -1, [*centres[k, :2], tops[k] + 1.0], physicsClientId=client)
+    p.setGravity(0.0, 0.0, -9.81, physicsClientId=client)
+    for _ in range(240):
+        p.stepSimulation(physicsClientId=client)
+    assert rocks in {c[2] for c in p.getContactPoints(bodyA=box, physicsClientId=client)}
+
+
+def test_bullet_list_same_shape_refills_the_same_list_objects():
+    first = bullet_list("test_vertices", np.zeros((4, 3)))
+    rows = list(first)
+    second = bullet_list("test_vertices", np.arange(12.0).reshape(4, 3))
+    assert second is first and all(a is b for a, b in zip(second, rows))  # pybullet's leaked refs stay bounded
+    assert second == np.arange(12.0).reshape(4, 3).tolist()
+    assert bullet_list("test_vertices", np.ones((5, 3))) is not first  # another shape, another list
+    with pytest.raises(ValueError, match="test_bad"):
+        bullet_list("test_bad", np.zeros((2, 2, 2)))

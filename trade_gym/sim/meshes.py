@@ -6,12 +6,14 @@ Owns `Mesh`, the builders (terrain grid, boxes, buildings, rocks, road strips, f
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property, lru_cache
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 import pybullet as p
+
+from trade_gym.sim.bullet_lists import bullet_list
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -46,25 +48,21 @@ class Mesh:
     normals: FloatArray  # (N, 3) unit
     indices: npt.NDArray[np.int64]  # (3M,) vertex indices
 
-    @cached_property
-    def vertices_list(self) -> list:
-        return self.vertices.tolist()
+    def create_visual_shape(self, client_id: int, rgba: tuple[float, float, float, float] | None = None) -> int:
+        """Textured visual shape; with `rgba`, a uniformly coloured one without UVs."""
+        if rgba is not None:
+            return p.createVisualShape(p.GEOM_MESH, vertices=bullet_list("vertices", self.vertices),
+                                       indices=bullet_list("indices", self.indices),
+                                       normals=bullet_list("normals", self.normals), rgbaColor=list(rgba),
+                                       physicsClientId=client_id)
+        return p.createVisualShape(p.GEOM_MESH, vertices=bullet_list("vertices", self.vertices),
+                                   indices=bullet_list("indices", self.indices), uvs=bullet_list("uvs", self.uvs),
+                                   normals=bullet_list("normals", self.normals), physicsClientId=client_id)
 
-    @cached_property
-    def uvs_list(self) -> list:
-        return self.uvs.tolist()
-
-    @cached_property
-    def normals_list(self) -> list:
-        return self.normals.tolist()
-
-    @cached_property
-    def indices_list(self) -> list:
-        return self.indices.tolist()
-
-    def create_visual_shape(self, client_id: int) -> int:
-        return p.createVisualShape(p.GEOM_MESH, vertices=self.vertices_list, indices=self.indices_list,
-                                   uvs=self.uvs_list, normals=self.normals_list, physicsClientId=client_id)
+    def create_collision_shape(self, client_id: int) -> int:
+        """Concave triangle-mesh collision shape (BVH; static bodies only), exactly the drawn surface."""
+        return p.createCollisionShape(p.GEOM_MESH, vertices=bullet_list("vertices", self.vertices),
+                                      indices=bullet_list("indices", self.indices), physicsClientId=client_id)
 
 
 def merge_meshes(meshes: list[Mesh]) -> Mesh:
@@ -72,6 +70,17 @@ def merge_meshes(meshes: list[Mesh]) -> Mesh:
     return Mesh(np.concatenate([m.vertices for m in meshes]), np.concatenate([m.uvs for m in meshes]),
                 np.concatenate([m.normals for m in meshes]),
                 np.concatenate([m.indices + o for m, o in zip(meshes, offsets)]))
+
+
+def placed_meshes(meshes: list[Mesh], yaw_rad: npt.ArrayLike, centres_m: npt.ArrayLike) -> Mesh:
+    """One world-frame mesh of meshes turned by yaw (N,) about z and moved to centres (N, 3) [m]:
+    v' = Rz(yaw) v + c, n' = Rz(yaw) n, UVs unchanged (textured as the separate meshes would be)."""
+    placed = []
+    for mesh, yaw, centre in zip(meshes, np.asarray(yaw_rad, dtype=np.float64), np.asarray(centres_m, np.float64)):
+        c, s = np.cos(yaw), np.sin(yaw)
+        R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        placed.append(Mesh(mesh.vertices @ R.T + centre, mesh.uvs, mesh.normals @ R.T, mesh.indices))
+    return merge_meshes(placed)
 
 
 def vertex_normals(vertices: FloatArray, triangles: npt.NDArray[np.int64]) -> FloatArray:
@@ -137,12 +146,15 @@ def create_terrain_visual(client_id: int, x_m: FloatArray, y_m: FloatArray, heig
     verts = np.stack([gx, gy, heights_m.astype(np.float64) - origin_m[2]], axis=-1).reshape(-1, 3)
     if drop_vertex is None:
         indices = _grid_index_list(ny, nx)
-    else:
+    else:  # kept triangles first, then degenerate (0, 0, 0) ones: a fixed length, so the list is pooled
         tris = grid_triangles(ny, nx)
-        indices = tris[~np.all(drop_vertex.ravel()[tris], axis=1)].ravel().tolist()
+        kept = tris[~np.all(drop_vertex.ravel()[tris], axis=1)]
+        padded = np.zeros_like(tris)
+        padded[: len(kept)] = kept
+        indices = bullet_list("indices", padded.ravel())
     uvs = _grid_uv_list(ny, nx, float(x_m[0]), float(y_m[0]), float(x_m[1] - x_m[0]), float(period_m))
-    return p.createVisualShape(p.GEOM_MESH, vertices=verts.tolist(), indices=indices, uvs=uvs,
-                               normals=normals.reshape(-1, 3).tolist(), physicsClientId=client_id)
+    return p.createVisualShape(p.GEOM_MESH, vertices=bullet_list("vertices", verts), indices=indices, uvs=uvs,
+                               normals=bullet_list("normals", normals.reshape(-1, 3)), physicsClientId=client_id)
 
 
 def building_meshes(boxes_lo: FloatArray, boxes_hi: FloatArray, facade_period_m: float,

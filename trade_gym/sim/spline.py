@@ -1,9 +1,12 @@
 """Planar Catmull-Rom paths with arc-length parametrisation for vehicles and roads.
 
-Owns `CatmullRomSpline`: position, unit tangent and heading at a travelled distance [m].
+Owns `CatmullRomSpline`: position, unit tangent and heading at a travelled distance [m] (arrays or scalars).
 """
 
 from __future__ import annotations
+
+import math
+from bisect import bisect_right
 
 import numpy as np
 import numpy.typing as npt
@@ -72,6 +75,11 @@ class CatmullRomSpline:
         self._s = np.concatenate([[0.0], np.cumsum(seg[seg > 0.0])])  # (M,) arc length [m]
         d = np.gradient(self._xy, self._s, axis=0)
         self._tangent = d / np.linalg.norm(d, axis=1, keepdims=True)  # (M, 2) unit
+        # the same tables as Python lists, for `point_at` (scalar queries without numpy call overhead)
+        self._s_list: list[float] = self._s.tolist()
+        self._rows: list[tuple[float, float, float, float]] = [
+            tuple(r) for r in np.column_stack([self._xy, self._tangent]).tolist()
+        ]
 
     @property
     def length_m(self) -> float:
@@ -92,6 +100,26 @@ class CatmullRomSpline:
         """s_m: (...) -> (...) yaw of travel, atan2(dy, dx) [rad]."""
         d = self.tangent(s_m)
         return np.arctan2(d[..., 1], d[..., 0])
+
+    def point_at(self, s_m: float) -> tuple[float, float, float, float]:
+        """Scalar s [m] -> (x, y, t_x, t_y): position [m] and unit tangent, equal to `position_m`/`tangent`.
+
+        np.interp's rule on the table: y = y_k + (s - s_k) (y_{k+1} - y_k) / (s_{k+1} - s_k), clamped at the ends.
+        """
+        s_tab, rows = self._s_list, self._rows
+        k = bisect_right(s_tab, s_m) - 1
+        if k < 0:
+            x, y, tx, ty = rows[0]
+        elif k >= len(s_tab) - 1:
+            x, y, tx, ty = rows[-1]
+        else:
+            (x0, y0, tx0, ty0), (x1, y1, tx1, ty1) = rows[k], rows[k + 1]
+            ds = s_m - s_tab[k]
+            step = s_tab[k + 1] - s_tab[k]
+            x, y = (x1 - x0) / step * ds + x0, (y1 - y0) / step * ds + y0
+            tx, ty = (tx1 - tx0) / step * ds + tx0, (ty1 - ty0) / step * ds + ty0
+        norm = math.sqrt(tx * tx + ty * ty)
+        return x, y, tx / norm, ty / norm
 
     def sample(self, spacing_m: float) -> tuple[FloatArray, FloatArray]:
         """Evenly spaced points along the curve: (K,) distances [m] and (K, 2) positions [m]."""

@@ -1,11 +1,14 @@
 """Seeded procedural heightfields and their exact height/slope queries.
 
-Owns `Heightfield` (the surface pybullet's GEOM_HEIGHTFIELD collides with), fractal noise and route carving.
+Owns `Heightfield` (the surface pybullet's GEOM_HEIGHTFIELD collides with; array and scalar queries),
+fractal noise and route carving.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -102,6 +105,47 @@ class Heightfield:
         gx = np.where(lower, h10 - h00, h11 - h01) / self.spacing_m
         gy = np.where(lower, h01 - h00, h11 - h10) / self.spacing_m
         return np.stack([gx, gy], axis=-1)
+
+    @cached_property
+    def _scalar_grid(self) -> tuple[list[float], int, int, float, float, float]:
+        """Row-major heights as a Python list (float32 -> float64 exactly), nx, ny, origin [m] and spacing [m]."""
+        ny, nx = self.shape
+        return self.heights_m.ravel().tolist(), nx, ny, self.origin_m[0], self.origin_m[1], self.spacing_m
+
+    def height_at(self, x_m: float, y_m: float) -> float:
+        """Scalar `height_m` [m]: the same equations and rounding in plain floats (the per-step hot path, so the
+        cell lookup is inlined and clamps use comparisons, cheaper than builtin min/max calls); NaN -> NaN."""
+        h, nx, ny, ox, oy, d = self._scalar_grid
+        u, v = (x_m - ox) / d, (y_m - oy) / d
+        u = 0.0 if u < 0.0 else (nx - 1.0 if u > nx - 1.0 else u)
+        v = 0.0 if v < 0.0 else (ny - 1.0 if v > ny - 1.0 else v)
+        if u != u or v != v:
+            return math.nan
+        i, j = int(u), int(v)  # u, v >= 0 so int() is floor()
+        if i > nx - 2:
+            i = nx - 2
+        if j > ny - 2:
+            j = ny - 2
+        fu, fv, k = u - i, v - j, j * nx + i
+        if fu + fv <= 1.0:
+            h00 = h[k]
+            return h00 + fu * (h[k + 1] - h00) + fv * (h[k + nx] - h00)
+        h11 = h[k + nx + 1]
+        return h11 + (1.0 - fu) * (h[k + nx] - h11) + (1.0 - fv) * (h[k + 1] - h11)
+
+    def gradient_at(self, x_m: float, y_m: float) -> tuple[float, float]:
+        """Scalar `gradient`: (dh/dx, dh/dy) of the triangle under (x, y); NaN in, NaN out."""
+        if x_m != x_m or y_m != y_m:
+            return math.nan, math.nan
+        h, nx, ny, ox, oy, d = self._scalar_grid
+        u = min(max((x_m - ox) / d, 0.0), nx - 1.0)
+        v = min(max((y_m - oy) / d, 0.0), ny - 1.0)
+        i, j = min(int(u), nx - 2), min(int(v), ny - 2)
+        k = j * nx + i
+        h00, h10, h01, h11 = h[k], h[k + 1], h[k + nx], h[k + nx + 1]
+        if (u - i) + (v - j) <= 1.0:
+            return (h10 - h00) / d, (h01 - h00) / d
+        return (h11 - h01) / d, (h11 - h10) / d
 
     def slope_deg(self, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> FloatArray:
         """Surface inclination [deg]: atan(|grad h|)."""

@@ -99,6 +99,8 @@ class VehicleMotion:
     def __post_init__(self) -> None:
         end = self.path.length_m if self.end_s_m is None else float(self.end_s_m)
         object.__setattr__(self, "end_s_m", end)
+        for name in ("speed_mps", "start_s_m", "delay_s"):  # plain floats keep the per-step scalar math fast
+            object.__setattr__(self, name, float(getattr(self, name)))
         if not np.isfinite(self.speed_mps) or self.speed_mps < 0.0:
             raise ValueError(f"VehicleMotion.speed_mps must be finite and >= 0, got {self.speed_mps!r}")
         if not 0.0 <= self.start_s_m <= end <= self.path.length_m + 1e-9:
@@ -118,8 +120,10 @@ class VehicleMotion:
         return self.delay_s + (self.end_s_m - self.start_s_m) / self.speed_mps
 
     def distance_m(self, t_s: float) -> float:
-        travelled = self.speed_mps * max(t_s - self.delay_s, 0.0)
-        return float(min(self.start_s_m + travelled, self.end_s_m))
+        """s(t) [m] for a scalar t [s] (conditional expressions: cheaper than builtin min/max calls)."""
+        since = t_s - self.delay_s
+        s = self.start_s_m + self.speed_mps * since if since > 0.0 else self.start_s_m
+        return float(s) if s < self.end_s_m else self.end_s_m
 
     def planar_velocity_mps(self, t_s: float) -> FloatArray:
         """(2,) world x, y velocity [m/s]; zero before the delay and after the stop."""
@@ -142,6 +146,7 @@ def terrain_pose(
     terrain: Heightfield, xy_m: npt.ArrayLike, heading_rad: npt.ArrayLike, half_extents_m: npt.ArrayLike
 ) -> tuple[FloatArray, FloatArray]:
     """Pose of N boxes resting on the terrain: (N, 3) box centres [m] and (N, 3, 3) R_world_vehicle.
+    (The vectorised reference; the step loop uses its scalar twin `vehicle_poses.pose_at`.)
 
     xy_m: (N, 2) [m], heading_rad: (N,), half_extents_m: (3,) or (N, 3) [m]. Pitch/roll from the plane
     through the footprint's corner heights; the bottom face's centre sits on the terrain at the box's
@@ -187,14 +192,13 @@ def matrix_to_quat_xyzw(R: npt.ArrayLike) -> FloatArray:
 
 def create_vehicle_shape(client_id: int, kind: str) -> int:
     """Visual shape id for `kind` (create once per reset, share between identical vehicles)."""
-    mesh = vehicle_model(kind).mesh
-    return p.createVisualShape(p.GEOM_MESH, vertices=mesh.vertices_list, indices=mesh.indices_list,
-                               uvs=mesh.uvs_list, normals=mesh.normals_list, physicsClientId=client_id)
+    return vehicle_model(kind).mesh.create_visual_shape(client_id)
 
 
 def create_vehicle_body(client_id: int, visual_shape_id: int, texture_id: int) -> int:
-    """Mass-0 body with a visual shape and no collision shape."""
+    """Mass-0 body with a visual shape and no collision shape; a maximal-coordinates (btRigidBody) body,
+    which stepSimulation skips at a fraction of a fixed-base multibody's cost."""
     body = p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=visual_shape_id,
-                             physicsClientId=client_id)
+                             useMaximalCoordinates=True, physicsClientId=client_id)
     p.changeVisualShape(body, -1, textureUniqueId=texture_id, rgbaColor=[1, 1, 1, 1], physicsClientId=client_id)
     return body

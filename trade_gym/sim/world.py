@@ -12,17 +12,17 @@ import numpy.typing as npt
 import pybullet as p
 
 from trade_gym.sim import city, desert, mountain
+from trade_gym.sim.bullet_lists import bullet_list
 from trade_gym.sim.layout import SceneLayout
 from trade_gym.sim.meshes import (
-    TEXTURE_PERIOD_M, Mesh, building_meshes, create_terrain_visual, polygon_mesh, rock_mesh, strip_mesh,
-    texture_path,
+    TEXTURE_PERIOD_M, Mesh, building_meshes, create_terrain_visual, placed_meshes, polygon_mesh, rock_mesh,
+    strip_mesh, texture_path,
 )
+from trade_gym.sim.roofs import RoofIndex
 from trade_gym.sim.scenes import SceneSpec, get_scene
 from trade_gym.sim.terrain import Heightfield
-from trade_gym.sim.vehicles import (
-    Vehicle, VehicleMotion, create_vehicle_body, create_vehicle_shape, matrix_to_quat_xyzw, terrain_pose,
-    vehicle_model,
-)
+from trade_gym.sim.vehicle_poses import VehiclePoses
+from trade_gym.sim.vehicles import Vehicle, VehicleMotion, create_vehicle_body, create_vehicle_shape, vehicle_model
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -43,13 +43,20 @@ def make_layout(spec: SceneSpec, rng: np.random.Generator, target_speed_mps: flo
     return LAYOUT_BUILDERS[spec.name](spec, rng, target_speed_mps)
 
 
-def _textured_body(cid: int, mesh: Mesh, texture_id: int, collision: int = -1) -> int:
-    """Static body at the world origin: `mesh` in world coordinates, optional collision shape."""
-    body = p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=collision,
-                             baseVisualShapeIndex=mesh.create_visual_shape(cid), physicsClientId=cid)
+def _static_body(cid: int, collision: int, visual: int, position_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                 texture_id: int = -1) -> int:
+    """Mass-0 body in maximal coordinates (a static btRigidBody: stepSimulation skips it at a fraction of a
+    fixed-base multibody's cost), optionally textured."""
+    body = p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=collision, baseVisualShapeIndex=visual,
+                             basePosition=list(position_m), useMaximalCoordinates=True, physicsClientId=cid)
     if texture_id >= 0:
         p.changeVisualShape(body, -1, textureUniqueId=texture_id, rgbaColor=list(WHITE_RGBA), physicsClientId=cid)
     return body
+
+
+def _textured_body(cid: int, mesh: Mesh, texture_id: int, collision: int = -1) -> int:
+    """Static body at the world origin: `mesh` in world coordinates, optional collision shape."""
+    return _static_body(cid, collision, mesh.create_visual_shape(cid), texture_id=texture_id)
 
 
 def _terrain_body(cid: int, layout: SceneLayout, texture_id: int) -> int:
@@ -57,8 +64,8 @@ def _terrain_body(cid: int, layout: SceneLayout, texture_id: int) -> int:
     hf = layout.terrain
     ny, nx = hf.shape
     collision = p.createCollisionShape(p.GEOM_HEIGHTFIELD, meshScale=[hf.spacing_m, hf.spacing_m, 1.0],
-                                       heightfieldData=hf.heights_m.ravel().tolist(), numHeightfieldRows=nx,
-                                       numHeightfieldColumns=ny, physicsClientId=cid)
+                                       heightfieldData=bullet_list("heightfield", hf.heights_m.ravel()),
+                                       numHeightfieldRows=nx, numHeightfieldColumns=ny, physicsClientId=cid)
     origin = np.array([*hf.centre_m, hf.bullet_base_z_m])
     drop = None
     if layout.lake is not None:
@@ -66,32 +73,17 @@ def _terrain_body(cid: int, layout: SceneLayout, texture_id: int) -> int:
         drop = layout.lake.normalised_radius(gx, gy) <= 1.0
     visual = create_terrain_visual(cid, hf.x_m, hf.y_m, hf.heights_m, hf.vertex_normals(),
                                    TEXTURE_PERIOD_M[layout.spec.ground_texture], origin, drop)
-    body = p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=collision, baseVisualShapeIndex=visual,
-                             basePosition=origin.tolist(), physicsClientId=cid)
-    p.changeVisualShape(body, -1, textureUniqueId=texture_id, rgbaColor=list(WHITE_RGBA), physicsClientId=cid)
-    return body
+    return _static_body(cid, collision, visual, tuple(origin.tolist()), texture_id)
 
 
-def _boulder_bodies(cid: int, layout: SceneLayout, texture_id: int) -> list[int]:
-    """Boulders sharing one collision hull and visual shape per (prototype, size class).
-
-    (pybullet's batchPositions would be faster but leaves getNumBodies() wrong, so bodies are made one by one.)
-    """
-    shapes: dict[tuple[int, int], tuple[int, int]] = {}
-    ids = []
-    for b in layout.boulders:
-        key = (b.prototype, b.size_class)
-        if key not in shapes:
-            mesh = rock_mesh(*key)
-            shapes[key] = (p.createCollisionShape(p.GEOM_MESH, vertices=mesh.vertices_list, physicsClientId=cid),
-                           mesh.create_visual_shape(cid))
-        quat = [0.0, 0.0, float(np.sin(b.yaw_rad / 2.0)), float(np.cos(b.yaw_rad / 2.0))]
-        body = p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=shapes[key][0],
-                                 baseVisualShapeIndex=shapes[key][1], basePosition=b.centre_m.tolist(),
-                                 baseOrientation=quat, physicsClientId=cid)
-        p.changeVisualShape(body, -1, textureUniqueId=texture_id, rgbaColor=list(WHITE_RGBA), physicsClientId=cid)
-        ids.append(body)
-    return ids
+def _boulder_body(cid: int, layout: SceneLayout, texture_id: int) -> int:
+    """All boulders as one body: their meshes merged in world coordinates, drawn as one visual shape and
+    collided with as one static BVH triangle mesh (exactly the drawn surface). One body instead of one per
+    rock keeps stepSimulation's per-body cost out of the step loop."""
+    rocks = layout.boulders
+    mesh = placed_meshes([rock_mesh(b.prototype, b.size_class) for b in rocks], [b.yaw_rad for b in rocks],
+                         [b.centre_m for b in rocks])
+    return _textured_body(cid, mesh, texture_id, collision=mesh.create_collision_shape(cid))
 
 
 def _building_bodies(cid: int, layout: SceneLayout, textures: dict[str, int]) -> list[int]:
@@ -118,17 +110,16 @@ def _road_body(cid: int, layout: SceneLayout, texture_id: int) -> int:
 
 def _lake_body(cid: int, layout: SceneLayout) -> int:
     mesh = polygon_mesh(layout.lake.outline_m(), layout.lake.level_m + LAKE_LIFT_M)
-    shape = p.createVisualShape(p.GEOM_MESH, vertices=mesh.vertices_list, indices=mesh.indices_list,
-                                normals=mesh.normals_list, rgbaColor=list(LAKE_RGBA), physicsClientId=cid)
-    return p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=shape, physicsClientId=cid)
+    return _static_body(cid, -1, mesh.create_visual_shape(cid, rgba=LAKE_RGBA))
 
 
 class World:
     """One episode's scene; vehicle poses are functions of time only (kinematic, visual-only bodies).
 
     Attributes: `spec`, `layout` (everything generated), `terrain` (Heightfield), `target` and `decoys`
-    (Vehicle), `body_ids_by_role` (terrain, boulders, buildings, road, lake) and `static_body_ids` (all of
-    those; road and lake have no collision shape, the terrain's is a GEOM_HEIGHTFIELD matching `terrain`).
+    (Vehicle), `body_ids_by_role` (terrain, boulders (all rocks in one body), buildings, road, lake) and
+    `static_body_ids` (a frozenset of all of those; road and lake have no collision shape, the terrain's is a
+    GEOM_HEIGHTFIELD matching `terrain`).
     """
 
     def __init__(self, client_id: int, layout: SceneLayout, target: Vehicle, decoys: tuple[Vehicle, ...],
@@ -141,10 +132,9 @@ class World:
         self.decoys = decoys
         # roles: terrain, boulders, buildings (walls with box collision, roofs), road and lake (visual only)
         self.body_ids_by_role = MappingProxyType(dict(body_ids_by_role))
-        self.static_body_ids: tuple[int, ...] = tuple(i for ids in self.body_ids_by_role.values() for i in ids)
-        self._moving = tuple(v for v in (target, *decoys) if v.motion.is_moving)
-        self._pose_cache: dict[int, tuple[float | None, FloatArray, FloatArray]] = {}
-        self._place(tuple(v for v in (target, *decoys) if not v.motion.is_moving), None)
+        self.static_body_ids: frozenset[int] = frozenset(i for ids in self.body_ids_by_role.values() for i in ids)
+        self.roofs = RoofIndex(layout.buildings_lo_m, layout.buildings_hi_m)
+        self._poses = VehiclePoses(client_id, self.terrain, (target, *decoys))  # places the parked ones
         self.update(0.0)
 
     @property
@@ -160,56 +150,45 @@ class World:
     def buildings_hi_m(self) -> FloatArray:
         return self.layout.buildings_hi_m
 
-    def _poses(self, vehicles: tuple[Vehicle, ...], t_s: float) -> tuple[FloatArray, FloatArray]:
-        """(N, 3) box centres [m] and (N, 3, 3) R_world_vehicle, one vectorised terrain query."""
-        s = [v.motion.distance_m(t_s) for v in vehicles]
-        xy = np.array([v.motion.path.position_m(si) for v, si in zip(vehicles, s)])
-        yaw = np.array([v.motion.path.heading_rad(si) for v, si in zip(vehicles, s)])
-        return terrain_pose(self.terrain, xy, yaw, np.array([v.half_extents_m for v in vehicles]))
+    def update(self, t_s: float) -> None:
+        """Pose the target and the moving decoys at time t_s (parked ones never move); once per t_s."""
+        self._poses.update(t_s)
 
     def vehicle_pose(self, v: Vehicle, t_s: float) -> tuple[FloatArray, FloatArray]:
-        """(3,) box centre [m] and (3, 3) R_world_vehicle at time t_s (cached for the last `update`)."""
-        cached = self._pose_cache.get(v.body_id)
-        if cached is not None and (cached[0] is None or cached[0] == t_s):
-            return cached[1].copy(), cached[2].copy()
-        pos, R = self._poses((v,), t_s)
-        return pos[0], R[0]
+        """(3,) box centre [m] and (3, 3) R_world_vehicle at time t_s, read-only arrays.
 
-    def _place(self, vehicles: tuple[Vehicle, ...], t_s: float | None) -> None:
-        """Pose bodies at t_s (None: parked, valid at any time) and remember the poses."""
-        if not vehicles:
-            return
-        pos, R = self._poses(vehicles, 0.0 if t_s is None else t_s)
-        for v, pk, Rk in zip(vehicles, pos, R):
-            self._pose_cache[v.body_id] = (t_s, pk, Rk)
-            p.resetBasePositionAndOrientation(v.body_id, pk.tolist(), matrix_to_quat_xyzw(Rk).tolist(),
-                                              physicsClientId=self.client_id)
-
-    def update(self, t_s: float) -> None:
-        """Pose the target and the moving decoys at time t_s (parked ones never move)."""
-        self._place(self._moving, float(t_s))
+        Cached for the last `update` time (and for parked vehicles); the same function of t_s otherwise.
+        """
+        return self._poses.pose(v, t_s)
 
     def target_velocity_mps(self, t_s: float) -> FloatArray:
-        """(3,) world velocity [m/s]: v_xy along the path, v_z = grad h . v_xy."""
-        m = self.target.motion
-        v_xy = m.planar_velocity_mps(t_s)
-        xy = m.path.position_m(m.distance_m(t_s))
-        return np.array([*v_xy, float(self.terrain.gradient(*xy) @ v_xy)])
+        """(3,) world velocity [m/s]: v_xy = speed * unit tangent along the path, v_z = grad h . v_xy;
+        zero before the target's delay and after its stop."""
+        m, t = self.target.motion, float(t_s)
+        if not m.is_moving or t < m.delay_s or t >= m.stop_time_s:
+            return np.zeros(3)
+        x, y, tx, ty = m.path.point_at(m.distance_m(t))
+        vx, vy = m.speed_mps * tx, m.speed_mps * ty
+        gx, gy = self.terrain.gradient_at(x, y)
+        return np.array((vx, vy, gx * vx + gy * vy))
 
     def ground_height_m(self, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> FloatArray:
-        """Terrain height [m] (buildings, rocks and vehicles excluded); vectorised."""
+        """Terrain height [m] (buildings, rocks and vehicles excluded); vectorised, fast path for two scalars."""
+        if isinstance(x_m, float) and isinstance(y_m, float):  # np.float64 is a float
+            return np.float64(self.terrain.height_at(float(x_m), float(y_m)))
         return self.terrain.height_m(x_m, y_m)
 
     def surface_height_m(self, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> FloatArray:
-        """max(terrain, roof of the building containing (x, y)) [m]; rocks excluded."""
-        x, y = np.asarray(x_m, dtype=np.float64), np.asarray(y_m, dtype=np.float64)
-        ground = self.terrain.height_m(x, y)
-        lo, hi = self.buildings_lo_m, self.buildings_hi_m
-        if len(lo) == 0:
+        """max(terrain, roof of the building containing (x, y)) [m]; rocks excluded. Vectorised; two scalars
+        (float or np.float64) take a few-microsecond path returning np.float64."""
+        if isinstance(x_m, float) and isinstance(y_m, float):
+            x, y = float(x_m), float(y_m)
+            ground, roof = self.terrain.height_at(x, y), self.roofs.height_at(x, y)
+            return np.float64(roof if roof > ground else ground)
+        ground = self.terrain.height_m(x_m, y_m)
+        if not len(self.buildings_lo_m):
             return ground
-        xe, ye = x[..., None], y[..., None]
-        inside = (xe >= lo[:, 0]) & (xe <= hi[:, 0]) & (ye >= lo[:, 1]) & (ye <= hi[:, 1])
-        return np.maximum(ground, np.max(np.where(inside, hi[:, 2], -np.inf), axis=-1))
+        return np.maximum(ground, self.roofs.heights(x_m, y_m))
 
     def drone_start(self) -> tuple[FloatArray, float]:
         """(3,) start position [m] and yaw [rad]: the target is in view of a downward camera."""
@@ -229,7 +208,7 @@ def build_world(client_id: int, scene: str, rng: np.random.Generator, target_spe
     tex = {name: p.loadTexture(str(texture_path(name)), physicsClientId=client_id) for name in sorted(names)}
     roles = {
         "terrain": (_terrain_body(client_id, layout, tex[spec.ground_texture]),),
-        "boulders": tuple(_boulder_bodies(client_id, layout, tex.get("rock", -1))),
+        "boulders": (_boulder_body(client_id, layout, tex["rock"]),) if layout.boulders else (),
         "buildings": tuple(_building_bodies(client_id, layout, tex)),
         "road": (_road_body(client_id, layout, tex["dirt_road"]),) if layout.road is not None else (),
         "lake": (_lake_body(client_id, layout),) if layout.lake is not None else (),

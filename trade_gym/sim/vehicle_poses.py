@@ -1,0 +1,109 @@
+"""Per-time vehicle poses for the env's step loop: scalar terrain-hugging poses, a per-time cache, body placement.
+
+Owns `VehiclePoses` and `pose_at` (one vehicle in plain `math`, faster than numpy for the few vehicles of a scene).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+import pybullet as p
+
+from trade_gym.sim.terrain import Heightfield
+from trade_gym.sim.vehicles import Vehicle
+
+FloatArray = npt.NDArray[np.float64]
+Pose12 = tuple[float, ...]  # centre x, y, z [m], then R_world_vehicle row-major (9)
+
+
+def pose_at(terrain: Heightfield, v: Vehicle, t_s: float) -> Pose12:
+    """Scalar `vehicles.terrain_pose` of `v` at time t_s: the box rests on the plane through its footprint.
+
+    Corners FL, FR, RL, RR at (x, y) +- half_x fwd +- half_y left; slopes along fwd and left from their heights;
+    n = (-pitch fwd - roll left, 1) / |.|, x_axis = (fwd, pitch) / |.|, y_axis = n x x_axis, and the
+    bottom face's centre on the terrain: centre = (x, y, h(x, y)) + half_z n.
+    """
+    x, y, c, s = v.motion.path.point_at(v.motion.distance_m(t_s))  # tangent (c, s) = (cos, sin) heading
+    hx, hy, hz = v.half_extents_m.tolist()
+    fx, fy, lx, ly = c * hx, s * hx, -s * hy, c * hy
+    h = terrain.height_at
+    z_fl, z_fr = h(x + (fx + lx), y + (fy + ly)), h(x + (fx - lx), y + (fy - ly))
+    z_rl, z_rr = h(x + (lx - fx), y + (ly - fy)), h(x + (-fx - lx), y + (-fy - ly))
+    pitch = (z_fl + z_fr - z_rl - z_rr) / (4.0 * hx)  # dz per metre forward
+    roll = (z_fl + z_rl - z_fr - z_rr) / (4.0 * hy)  # dz per metre left
+    nx, ny = -pitch * c + roll * s, -pitch * s - roll * c
+    inv = 1.0 / math.sqrt(nx * nx + ny * ny + 1.0)
+    nx, ny, nz = nx * inv, ny * inv, inv
+    inv = 1.0 / math.sqrt(c * c + s * s + pitch * pitch)
+    ax, ay, az = c * inv, s * inv, pitch * inv
+    bx, by, bz = ny * az - nz * ay, nz * ax - nx * az, nx * ay - ny * ax  # n x x_axis
+    return (x + hz * nx, y + hz * ny, h(x, y) + hz * nz, ax, bx, nx, ay, by, ny, az, bz, nz)
+
+
+def quat_xyzw_at(pose: Pose12) -> tuple[float, float, float, float]:
+    """Unit quaternion (x, y, z, w) of the pose's rotation, Shepperd's method (as `vehicles.matrix_to_quat_xyzw`)."""
+    _, _, _, m00, m01, m02, m10, m11, m12, m20, m21, m22 = pose
+    tr = m00 + m11 + m22
+    if tr > 0.0:
+        r = 2.0 * math.sqrt(tr + 1.0)
+        q = ((m21 - m12) / r, (m02 - m20) / r, (m10 - m01) / r, 0.25 * r)
+    elif m00 >= m11 and m00 >= m22:
+        r = 2.0 * math.sqrt(1.0 + m00 - m11 - m22)
+        q = (0.25 * r, (m01 + m10) / r, (m02 + m20) / r, (m21 - m12) / r)
+    elif m11 >= m22:
+        r = 2.0 * math.sqrt(1.0 + m11 - m22 - m00)
+        q = ((m01 + m10) / r, 0.25 * r, (m12 + m21) / r, (m02 - m20) / r)
+    else:
+        r = 2.0 * math.sqrt(1.0 + m22 - m00 - m11)
+        q = ((m02 + m20) / r, (m12 + m21) / r, 0.25 * r, (m10 - m01) / r)
+    inv = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return q[0] * inv, q[1] * inv, q[2] * inv, q[3] * inv
+
+
+def _arrays(pose: Pose12) -> tuple[FloatArray, FloatArray]:
+    """(3,) centre and (3, 3) R_world_vehicle, read-only views of one (4, 3) buffer."""
+    buf = np.array(pose, dtype=np.float64).reshape(4, 3)
+    buf.setflags(write=False)
+    return buf[0], buf[1:]
+
+
+class VehiclePoses:
+    """Poses of a world's vehicles as pure functions of time, each computed once per time.
+
+    Parked vehicles are posed and placed in pybullet once; `update(t)` computes the moving ones at t and
+    places their bodies; `pose(v, t)` returns the cached arrays when t is that time (or v is parked) and
+    computes the same function otherwise, so the result never depends on whether `update(t)` ran.
+    """
+
+    def __init__(self, client_id: int, terrain: Heightfield, vehicles: tuple[Vehicle, ...]) -> None:
+        self.client_id = client_id
+        self.terrain = terrain
+        self._moving = tuple(v for v in vehicles if v.motion.is_moving)
+        self._cache: dict[int, tuple[float | None, FloatArray, FloatArray]] = {}
+        self._t_s: float | None = None
+        for v in vehicles:
+            if not v.motion.is_moving:
+                self._place(v, None, pose_at(terrain, v, 0.0))
+
+    def _place(self, v: Vehicle, t_s: float | None, pose: Pose12) -> None:
+        """Cache the pose (t None: valid at any time) and move the body there."""
+        self._cache[v.body_id] = (t_s, *_arrays(pose))
+        p.resetBasePositionAndOrientation(v.body_id, pose[:3], quat_xyzw_at(pose), physicsClientId=self.client_id)
+
+    def update(self, t_s: float) -> None:
+        """Pose and place the moving vehicles at time t_s [s] (no work if already there)."""
+        t = float(t_s)
+        if t == self._t_s:
+            return
+        for v in self._moving:
+            self._place(v, t, pose_at(self.terrain, v, t))
+        self._t_s = t
+
+    def pose(self, v: Vehicle, t_s: float) -> tuple[FloatArray, FloatArray]:
+        """(3,) box centre [m] and (3, 3) R_world_vehicle at time t_s, read-only arrays."""
+        cached = self._cache.get(v.body_id)
+        if cached is not None and (cached[0] is None or cached[0] == t_s):
+            return cached[1], cached[2]
+        return _arrays(pose_at(self.terrain, v, float(t_s)))
