@@ -90,6 +90,15 @@ class Pose:
     def identity(cls) -> Pose:
         return cls(np.eye(3), np.zeros(3))
 
+    @classmethod
+    def _trusted(cls, R: FloatArray, t: FloatArray) -> Pose:
+        """Build from arrays already known to be a finite float64 (3, 3) and (3,) (results of
+        composing or inverting valid poses), skipping validation on this hot path."""
+        pose = object.__new__(cls)
+        object.__setattr__(pose, "R", R)
+        object.__setattr__(pose, "t", t)
+        return pose
+
     @property
     def matrix(self) -> FloatArray:
         """4x4 homogeneous matrix."""
@@ -99,11 +108,12 @@ class Pose:
         return T
 
     def inverse(self) -> Pose:
-        return Pose(self.R.T, -self.R.T @ self.t)
+        Rt = self.R.T
+        return Pose._trusted(Rt, -(Rt @ self.t))
 
     def compose(self, other: Pose) -> Pose:
         """self ∘ other: T_a_b.compose(T_b_c) = T_a_c."""
-        return Pose(self.R @ other.R, self.R @ other.t + self.t)
+        return Pose._trusted(self.R @ other.R, self.R @ other.t + self.t)
 
     def apply(self, points: FloatArray) -> FloatArray:
         """points: (N, 3) in frame b -> (N, 3) in frame a."""

@@ -5,6 +5,7 @@ Boxes are (x, y, w, h) in pixels with (x, y) the top-left corner; IMU in body fr
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,15 +48,15 @@ class BBox:
 
 def iou(a: npt.ArrayLike, b: npt.ArrayLike) -> float:
     """IoU of two (x, y, w, h) boxes; 0.0 when either is missing (NaN) or empty."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+    ax, ay, aw, ah = (float(v) for v in np.asarray(a, dtype=np.float64).reshape(4))
+    bx, by, bw, bh = (float(v) for v in np.asarray(b, dtype=np.float64).reshape(4))
+    if not all(math.isfinite(v) for v in (ax, ay, aw, ah, bx, by, bw, bh)):
         return 0.0
-    ix = max(0.0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
-    iy = max(0.0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
+    ix = max(0.0, min(ax + aw, bx + bw) - max(ax, bx))
+    iy = max(0.0, min(ay + ah, by + bh) - max(ay, by))
     inter = ix * iy
-    union = a[2] * a[3] + b[2] * b[3] - inter
-    return float(inter / union) if union > 0 else 0.0
+    union = aw * ah + bw * bh - inter
+    return inter / union if union > 0 else 0.0
 
 
 @dataclass(frozen=True)
@@ -73,3 +74,18 @@ class ImuBatch:
     @classmethod
     def empty(cls) -> ImuBatch:
         return cls(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+
+
+def iou_many(boxes: npt.ArrayLike, box: npt.ArrayLike) -> FloatArray:
+    """IoU of each row of `boxes` (N, 4) with one `box` (4,); 0 where either is missing (NaN)."""
+    a = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+    b = np.asarray(box, dtype=np.float64).reshape(4)
+    if len(a) == 0 or not np.all(np.isfinite(b)):
+        return np.zeros(len(a))
+    ix = np.clip(np.minimum(a[:, 0] + a[:, 2], b[0] + b[2]) - np.maximum(a[:, 0], b[0]), 0.0, None)
+    iy = np.clip(np.minimum(a[:, 1] + a[:, 3], b[1] + b[3]) - np.maximum(a[:, 1], b[1]), 0.0, None)
+    inter = ix * iy
+    union = a[:, 2] * a[:, 3] + b[2] * b[3] - inter
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(union > 0, inter / union, 0.0)
+    return np.where(np.all(np.isfinite(a), axis=1), out, 0.0)

@@ -6,6 +6,7 @@ the policy's action flows back as a velocity setpoint.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import gymnasium as gym
@@ -14,7 +15,7 @@ import pybullet as p
 from gymnasium import spaces
 
 from trade.geometry import Pose
-from trade.types import iou
+from trade.types import iou, iou_many
 from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.ground_truth import GroundTruth, VehicleBox, compute_ground_truth
@@ -164,7 +165,7 @@ class TradeFollowEnv(gym.Env):
         reward, terms = compute_reward(
             self.reward_config,
             target_visible=visible,
-            target_pixel=self._target_pixel(truth),
+            target_pixel=truth.target_center_px,
             image_size_px=self.config.camera_size,
             height_above_target_m=self._state.position_m[2] - truth.target_position_m[2],
             nominal_height_m=self.world.spec.follow_altitude_agl_m,
@@ -220,9 +221,8 @@ class TradeFollowEnv(gym.Env):
             self.quadrotor.physics_step(dt)
             p.stepSimulation(physicsClientId=cid)
             self._t_s += dt
-            self._state = self.quadrotor.read_state()
-            self.imu.add_truth(self._t_s, self._state.specific_force_body_mps2,
-                               self._state.angular_velocity_body_radps)
+            self.imu.add_truth(self._t_s, *self.quadrotor.read_imu_truth())
+        self._state = self.quadrotor.read_state()
         self._distance_flown_m += float(np.linalg.norm(self._state.position_m - previous))
         self.world.update(self._t_s)
         return self.quadrotor.collided(self.world.static_body_ids) or self._below_surface()
@@ -232,10 +232,12 @@ class TradeFollowEnv(gym.Env):
         return bool(z < float(self.world.surface_height_m(x, y)))
 
     def _true_camera_pose(self) -> Pose:
-        return self.camera.pose(self._state.R_world_body, self._state.position_m)
+        """The camera's exact pose at the current frame (computed once per frame in `_sense`)."""
+        return self._T_world_cam_true
 
     def _sense(self) -> tuple[SensorFrame, GroundTruth]:
-        T_world_cam = self._true_camera_pose()
+        T_world_cam = self.camera.pose(self._state.R_world_body, self._state.position_m)
+        self._T_world_cam_true = T_world_cam
         frame = self.camera.render(T_world_cam) if self.config.needs_rendering else None
         self._last_frame = frame
         target_box = self._vehicle_box(self.world.target)
@@ -280,20 +282,16 @@ class TradeFollowEnv(gym.Env):
             image_size_px=self.config.camera_size,
         )
 
-    def _target_pixel(self, truth: GroundTruth) -> np.ndarray:
-        T_cam_world = self._true_camera_pose().inverse()
-        return self.camera.intrinsics.project(T_cam_world.apply(truth.target_position_m.reshape(1, 3)))[0]
-
     def _info(self, truth: GroundTruth, estimate: PerceptionOutput, crashed: bool,
               terms: dict[str, float] | None) -> dict[str, Any]:
         est_iou = iou(truth.target_bbox, estimate.bbox)
-        decoy_ious = [iou(d, estimate.bbox) for d in truth.decoy_bboxes]
-        best_decoy = max(decoy_ious, default=0.0)
+        best_decoy = float(iou_many(truth.decoy_bboxes, estimate.bbox).max(initial=0.0))
         drone = self._state.position_m
         info: dict[str, Any] = {
             "t_s": self._t_s,
-            "gt_bbox": truth.target_bbox.copy(),
-            "est_bbox": estimate.bbox.copy(),
+            # Arrays below are fresh every frame (nothing aliases them), so they are not copied.
+            "gt_bbox": truth.target_bbox,
+            "est_bbox": estimate.bbox,
             "iou": est_iou,
             "target_visible": truth.target_visible_fraction >= self.config.visible_fraction_threshold,
             "target_visible_fraction": truth.target_visible_fraction,
@@ -304,11 +302,12 @@ class TradeFollowEnv(gym.Env):
             "ground_depth_est": estimate.ground_depth_m,
             "est_valid": estimate.valid,
             "crashed": crashed,
-            "drone_position_m": drone.copy(),
-            "target_position_m": truth.target_position_m.copy(),
-            "horizontal_distance_m": float(np.linalg.norm(truth.target_position_m[:2] - drone[:2])),
+            "drone_position_m": drone,
+            "target_position_m": truth.target_position_m,
+            "horizontal_distance_m": math.hypot(truth.target_position_m[0] - drone[0],
+                                                truth.target_position_m[1] - drone[1]),
             # Only the decoys in view, so the array holds no NaN rows: (k, 4) [px].
-            "decoy_bboxes": truth.decoy_bboxes[np.all(np.isfinite(truth.decoy_bboxes), axis=1)].copy(),
+            "decoy_bboxes": truth.decoy_bboxes[~np.isnan(truth.decoy_bboxes[:, 0])],
         }
         for name, value in (terms or {}).items():
             info[f"reward_{name}"] = value

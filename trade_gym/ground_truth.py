@@ -53,6 +53,7 @@ class GroundTruth:
     target_position_m: FloatArray  # (3,) world, centre of the target's box
     target_velocity_mps: FloatArray  # (3,) world
     target_depth_m: float  # camera-frame z of the target's centre
+    target_center_px: FloatArray  # (2,) projection of the target's centre; NaN behind the camera
     ground_depth_m: float  # camera-frame z of the static surface under the box centre's ray
     ground_point_m: FloatArray  # (3,) world point of that surface hit, NaN if none
 
@@ -62,7 +63,12 @@ def projected_boxes(K: CameraIntrinsics, T_cam_world: Pose, boxes: list[VehicleB
     NaN rows for boxes out of view or with a corner behind the camera. One vectorised projection."""
     if not boxes:
         return np.zeros((0, 4))
-    corners = np.concatenate([b.points(_UNIT_CORNERS) for b in boxes])  # (8B, 3)
+    centres = np.array([b.center_m for b in boxes])  # (B, 3)
+    rotations = np.array([b.R_world_vehicle for b in boxes])  # (B, 3, 3)
+    halves = np.array([b.half_extents_m for b in boxes])  # (B, 3)
+    # corner_k = c + R (u_k * h), for the 8 unit corners u_k of every box
+    local = _UNIT_CORNERS[None, :, :] * halves[:, None, :]  # (B, 8, 3)
+    corners = (np.einsum("bij,bkj->bki", rotations, local) + centres[:, None, :]).reshape(-1, 3)
     cam = corners @ T_cam_world.R.T + T_cam_world.t
     z = cam[:, 2].reshape(-1, 8)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -158,7 +164,8 @@ def compute_ground_truth(
     else:
         boxes = projected_boxes(K, T_cam_world, [target, *decoys])
         target_bbox, decoy_bboxes = boxes[0], boxes[1:]
-    target_depth = float(T_cam_world.apply(target.center_m.reshape(1, 3))[0, 2])
+    target_cam = T_cam_world.apply(target.center_m.reshape(1, 3))
+    target_depth = float(target_cam[0, 2])
     fraction = visible_fraction(client_id, K, T_world_cam, target)
     centre = target_bbox[:2] + target_bbox[2:] / 2.0
     ground_depth, ground_point = ground_hit(client_id, K, T_world_cam, centre, max_range_m)
@@ -169,6 +176,7 @@ def compute_ground_truth(
         target_position_m=target.center_m.copy(),
         target_velocity_mps=np.asarray(target_velocity_mps, dtype=np.float64),
         target_depth_m=target_depth,
+        target_center_px=K.project(target_cam)[0],
         ground_depth_m=ground_depth,
         ground_point_m=ground_point,
     )

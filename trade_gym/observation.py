@@ -6,10 +6,11 @@ policy is invariant to the world's yaw; a missing estimate shows as zeros with `
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from gymnasium import spaces
 
-from trade.geometry import rotation_z
 from trade.types import ImuBatch
 from trade_gym.perception.base import FloatArray, PerceptionOutput
 
@@ -53,36 +54,44 @@ def build_observation(
     time_lost_s: float,
     image_size_px: int,
 ) -> dict[str, np.ndarray]:
-    """Map an estimate and the drone's own state to the observation dict (float32, clipped)."""
-    R_heading_world = rotation_z(drone_yaw_est_rad).T
+    """Map an estimate and the drone's own state to the observation dict (float32, clipped).
+
+    Written with scalar math: this runs every env step and numpy's per-call overhead on
+    3-vectors would dominate it."""
+    c, s = math.cos(drone_yaw_est_rad), math.sin(drone_yaw_est_rad)
+
+    def heading(v: FloatArray, bound: float) -> list[float]:
+        # R_heading_world v = Rz(yaw)^T v, clipped to the space's bounds; zeros when unknown
+        x, y, z = float(v[0]), float(v[1]), float(v[2])
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+            return [0.0, 0.0, 0.0]
+        return [_clip(c * x + s * y, bound), _clip(-s * x + c * y, bound), _clip(z, bound)]
+
     rel = estimate.position_world_m - drone_position_est_m
-    rel_h = R_heading_world @ rel if np.all(np.isfinite(rel)) else np.zeros(3)
-    vel = estimate.velocity_world_mps
-    vel_h = R_heading_world @ vel if np.all(np.isfinite(vel)) else np.zeros(3)
-    bbox = estimate.bbox
-    if np.all(np.isfinite(bbox)):
-        centre = bbox[:2] + bbox[2:] / 2.0
-        bbox_norm = np.concatenate([centre, bbox[2:]]) / image_size_px
+    x, y, w, h = (float(v) for v in estimate.bbox)
+    if all(math.isfinite(v) for v in (x, y, w, h)):
+        bbox_norm = [min(max(v / image_size_px, 0.0), 1.0) for v in (x + w / 2.0, y + h / 2.0, w, h)]
     else:
-        bbox_norm = np.zeros(4)
-    depth = estimate.target_depth_m if np.isfinite(estimate.target_depth_m) else 0.0
+        bbox_norm = [0.0, 0.0, 0.0, 0.0]
+    depth = estimate.target_depth_m if math.isfinite(estimate.target_depth_m) else 0.0
     if len(imu.t_s):
         imu_mean = np.concatenate([imu.accel_mps2.mean(axis=0), imu.gyro_radps.mean(axis=0)])
         imu_mean = np.where(np.isfinite(imu_mean), imu_mean, 0.0)
+        imu_values = [_clip(float(v), IMU_ACCEL_BOUND_MPS2) for v in imu_mean[:3]]
+        imu_values += [_clip(float(v), IMU_GYRO_BOUND_RADPS) for v in imu_mean[3:]]
     else:
-        imu_mean = np.zeros(6)
-    obs = {
-        "target_pos_rel_m": np.clip(rel_h, -POSITION_BOUND_M, POSITION_BOUND_M),
-        "target_vel_mps": np.clip(vel_h, -VELOCITY_BOUND_MPS, VELOCITY_BOUND_MPS),
-        "drone_vel_mps": np.clip(R_heading_world @ drone_velocity_world_mps, -VELOCITY_BOUND_MPS,
-                                 VELOCITY_BOUND_MPS),
-        "bbox_norm": np.clip(bbox_norm, 0.0, 1.0),
-        "target_depth_m": np.clip([depth], 0.0, POSITION_BOUND_M),
-        "track_valid": np.array([1.0 if estimate.valid else 0.0]),
-        "time_lost_s": np.array([min(time_lost_s, TIME_BOUND_S)]),
-        "imu": np.concatenate([
-            np.clip(imu_mean[:3], -IMU_ACCEL_BOUND_MPS2, IMU_ACCEL_BOUND_MPS2),
-            np.clip(imu_mean[3:], -IMU_GYRO_BOUND_RADPS, IMU_GYRO_BOUND_RADPS),
-        ]),
+        imu_values = [0.0] * 6
+    return {
+        "target_pos_rel_m": np.array(heading(rel, POSITION_BOUND_M), np.float32),
+        "target_vel_mps": np.array(heading(estimate.velocity_world_mps, VELOCITY_BOUND_MPS), np.float32),
+        "drone_vel_mps": np.array(heading(drone_velocity_world_mps, VELOCITY_BOUND_MPS), np.float32),
+        "bbox_norm": np.array(bbox_norm, np.float32),
+        "target_depth_m": np.array([min(max(depth, 0.0), POSITION_BOUND_M)], np.float32),
+        "track_valid": np.array([1.0 if estimate.valid else 0.0], np.float32),
+        "time_lost_s": np.array([min(time_lost_s, TIME_BOUND_S)], np.float32),
+        "imu": np.array(imu_values, np.float32),
     }
-    return {k: v.astype(np.float32) for k, v in obs.items()}
+
+
+def _clip(value: float, bound: float) -> float:
+    return min(max(value, -bound), bound)

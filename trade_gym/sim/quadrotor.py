@@ -249,10 +249,12 @@ class Quadrotor:
             ax, ay = ax * s, ay * s
         return ax, ay, fz
 
-    def read_state(self) -> DroneState:
-        """Ground truth after the last step; specific force R_pre^T ((v - v_pre)/dt - g)."""
+    def _sample(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, ...],
+                               tuple[float, float, float], tuple[float, float, float]]:
+        """Raw state after the last step: position, velocity, angular velocity (world), row-major
+        R_world_body, body rates R^T w and specific force R_pre^T ((v - v_pre)/dt - g)."""
         if self.body_id is None:
-            raise RuntimeError("Quadrotor.read_state called before spawn()")
+            raise RuntimeError("Quadrotor state read before spawn()")
         c, b = self.client_id, self.body_id
         pos, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
         vel, w = p.getBaseVelocity(b, physicsClientId=c)
@@ -266,14 +268,23 @@ class Quadrotor:
             ax, ay, az = (vel[0] - v0[0]) * inv_dt, (vel[1] - v0[1]) * inv_dt, (vel[2] - v0[2]) * inv_dt
             mp = self._m_pre
         az -= self._gravity_z  # f = a - g
-        # one array: position (3), R (9), velocity (3), w_body = R^T w_world (3), f_body = R_pre^T f (3)
-        flat = np.array((
-            *pos, *m, *vel,
-            m[0] * w[0] + m[3] * w[1] + m[6] * w[2], m[1] * w[0] + m[4] * w[1] + m[7] * w[2],
-            m[2] * w[0] + m[5] * w[1] + m[8] * w[2],
-            mp[0] * ax + mp[3] * ay + mp[6] * az, mp[1] * ax + mp[4] * ay + mp[7] * az,
-            mp[2] * ax + mp[5] * ay + mp[8] * az,
-        ))
+        w_body = (m[0] * w[0] + m[3] * w[1] + m[6] * w[2], m[1] * w[0] + m[4] * w[1] + m[7] * w[2],
+                  m[2] * w[0] + m[5] * w[1] + m[8] * w[2])
+        f_body = (mp[0] * ax + mp[3] * ay + mp[6] * az, mp[1] * ax + mp[4] * ay + mp[7] * az,
+                  mp[2] * ax + mp[5] * ay + mp[8] * az)
+        return pos, vel, w, m, w_body, f_body
+
+    def read_imu_truth(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """(specific force (3,) body [m/s^2], angular rate (3,) body [rad/s]) after the last step:
+        the cheap read for physics sub-steps where only the IMU needs the state."""
+        _, _, _, _, w_body, f_body = self._sample()
+        return f_body, w_body
+
+    def read_state(self) -> DroneState:
+        """Ground truth after the last step; specific force R_pre^T ((v - v_pre)/dt - g)."""
+        pos, vel, _, m, w_body, f_body = self._sample()
+        # one array: position (3), R (9), velocity (3), body rates (3), specific force (3)
+        flat = np.array((*pos, *m, *vel, *w_body, *f_body))
         return DroneState(
             position_m=flat[0:3],
             R_world_body=flat[3:12].reshape(3, 3),
