@@ -19,6 +19,7 @@ from trade.planes import MultiRansacConfig, Plane, multi_ransac
 from trade.raycast import RaycastConfig, depth_uncertainty, raycast_plane
 from trade.roi_features import RoiConfig, RoiFeatures, RoiFeatureTracker
 from trade.temporal_fusion import TemporalFusionConfig, TemporalPlaneFusion
+from trade.tracking.colour_box import ColourBoxConfig, ColourBoxRefiner
 from trade.tracking.dcf import DcfConfig, DcfTracker
 from trade.tracking.peaks import PeakChoice, PeakConfig, highest_peak, select_peak
 from trade.trajectory import TrajectoryConfig, TrajectoryModel
@@ -37,12 +38,14 @@ class PipelineConfig:
 
     dcf: DcfConfig = field(default_factory=DcfConfig)
     peaks: PeakConfig = field(default_factory=PeakConfig)
+    colour_box: ColourBoxConfig = field(default_factory=ColourBoxConfig)
     trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
     roi: RoiConfig = field(default_factory=RoiConfig)
     ransac: MultiRansacConfig = PAPER_RANSAC
     fusion: TemporalFusionConfig = field(default_factory=lambda: TemporalFusionConfig(ransac=PAPER_RANSAC))
     raycast: RaycastConfig = field(default_factory=RaycastConfig)
     trajectory_guidance: bool = True  # False: the "dcf" baseline (window on the last box, top peak)
+    box_refinement: bool = True  # fit the box to the target's colour blob (the DCF keeps its aspect)
     temporal_fusion: bool = True
     ground_mask: bool = False  # needs single-image depth (not part of this stack yet)
     single_image_depth: bool = False
@@ -114,6 +117,8 @@ class TradePipeline:
         self.intrinsics = intrinsics
         self._rng = rng
         self.tracker = DcfTracker(config.dcf)
+        self.refiner = ColourBoxRefiner(config.colour_box)
+        self._box: BBox | None = None  # last output box
         self.trajectory = TrajectoryModel(config.trajectory)
         self.roi = RoiFeatureTracker(config.roi, intrinsics)
         self.fusion = TemporalPlaneFusion(config.fusion, rng)
@@ -124,6 +129,8 @@ class TradePipeline:
         """Start tracking `box` (x, y, w, h) [px] in `image_rgb` (H, W, 3) uint8 at time t_s."""
         self._check_image(image_rgb)
         self.tracker.init(image_rgb, box)
+        self.refiner.init(image_rgb, box)
+        self._box = box
         self.trajectory = TrajectoryModel(self.config.trajectory)
         self.roi.reset()
         self.fusion.reset()
@@ -150,11 +157,13 @@ class TradePipeline:
         choice, scale = self._choose_peak(image_rgb, predicted_px)
         tracked = choice.score >= self.config.min_peak_score or not self.config.trajectory_guidance
         if tracked:
-            box = self.tracker.commit(choice.location_px, scale)
+            dcf_box = self.tracker.commit(choice.location_px, scale)
             if not choice.ambiguous:
                 self.tracker.update(image_rgb)
+            box = self._refine_box(image_rgb, dcf_box, learn=not choice.ambiguous)
         else:
             box = self._coast_box(predicted_px)
+        self._box = box
         tracker_ms = (time.perf_counter() - start) * 1e3
         start = time.perf_counter()
         roi = self.roi.step(cv2.cvtColor(image_rgb, cv2.COLOR_RGB2GRAY), box, T_world_cam)
@@ -184,9 +193,23 @@ class TradePipeline:
             scale = self.tracker.estimate_scale(image_rgb, choice.location_px)
         return choice, scale
 
+    def _refine_box(self, image_rgb: npt.NDArray[np.uint8], dcf_box: BBox, learn: bool) -> BBox:
+        """The output box: the target's colour blob around the DCF centre when that blob is plausible,
+        else the last output size centred on the DCF location."""
+        centre = dcf_box.center
+        fallback = BBox.from_center(centre[0], centre[1], self._box.w_px, self._box.h_px)
+        if not self.config.box_refinement:
+            return dcf_box
+        refinement = self.refiner.refine(image_rgb, centre, self._box)
+        if refinement is None or not refinement.accepted:
+            return fallback
+        if learn:
+            self.refiner.update(image_rgb, refinement)
+        return refinement.box
+
     def _coast_box(self, predicted_px: FloatArray) -> BBox:
         """While lost, the box follows the trajectory prediction with its last size."""
-        last = self.tracker.box
+        last = self._box
         if not self._in_image(predicted_px):
             return last
         return BBox.from_center(predicted_px[0], predicted_px[1], last.w_px, last.h_px)

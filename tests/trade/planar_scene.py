@@ -35,9 +35,12 @@ class PlanarScene:
         ground = cv2.GaussianBlur(ground, (0, 0), TEXTURE_CELL_PX / 3)
         side = int(TARGET_SIDE_M / TEXTURE_M_PER_PX)
         target = np.zeros((side, side, 3), np.uint8)
-        target[:] = (200, 30, 30)
-        stripes = rng.integers(0, 2, (side // TEXTURE_CELL_PX, side // TEXTURE_CELL_PX)).astype(np.uint8) * 200
-        target[..., 1] = cv2.resize(stripes, (side, side), interpolation=cv2.INTER_NEAREST)
+        # A red vehicle with darker red panels: one colour family, with texture for the correlation filter.
+        panels = rng.integers(0, 2, (side // TEXTURE_CELL_PX, side // TEXTURE_CELL_PX)).astype(np.float64)
+        shade = cv2.resize(panels, (side, side), interpolation=cv2.INTER_NEAREST)
+        target[..., 0] = (220 - 90 * shade).astype(np.uint8)
+        target[..., 1] = 25
+        target[..., 2] = 30
         return cls(CameraIntrinsics.from_fov(size_px, size_px, fov_deg), ground, target)
 
     def camera_pose(self, position_m: np.ndarray) -> Pose:

@@ -1,8 +1,10 @@
 """Correlation filter tracking with trajectory-guided peak selection (paper: "Tracking with trajectory estimates").
 
-Features, the DCF tracker and its score maps, and the choice of a peak near a predicted location.
+Features, the DCF tracker and its score maps, the choice of a peak near a predicted location,
+and the colour-model refinement of the output box.
 """
 
+from trade.tracking.colour_box import BoxRefinement, ColourBoxConfig, ColourBoxRefiner
 from trade.tracking.dcf import DcfConfig, DcfTracker
 from trade.tracking.features import FeatureConfig, extract_features
 from trade.tracking.peaks import PeakChoice, PeakConfig, ResponseMap, highest_peak, select_peak
@@ -10,6 +12,9 @@ from trade.tracking.scale import ScaleConfig
 from trade.tracking.window import sample_windows
 
 __all__ = [
+    "BoxRefinement",
+    "ColourBoxConfig",
+    "ColourBoxRefiner",
     "DcfConfig",
     "DcfTracker",
     "FeatureConfig",
