@@ -23,7 +23,7 @@ class EnvConfig:
     """Keyword arguments of `gym.make("TradeFollow-v0", **kwargs)`; see `TradeFollowEnv`."""
 
     scene: str = "desert"
-    perception: str = "oracle"
+    perception: str = "trade"
     pose_source: str = "gt"
     render_mode: str | None = None
     camera_size: int = 256  # square image side [px]

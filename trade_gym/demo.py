@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scenes", nargs="+", default=list(SCENE_NAMES), choices=SCENE_NAMES)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--duration-s", type=float, default=20.0)
-    parser.add_argument("--perception", default="oracle", choices=("oracle", "trade", "dcf"))
+    parser.add_argument("--perception", default="trade", choices=("oracle", "trade", "dcf"))
     parser.add_argument("--camera-size", type=int, default=256)
     parser.add_argument("--no-gif", action="store_true")
     args = parser.parse_args(argv)
