@@ -91,7 +91,7 @@ class Pose:
         return cls(np.eye(3), np.zeros(3))
 
     @classmethod
-    def _trusted(cls, R: FloatArray, t: FloatArray) -> Pose:
+    def unchecked(cls, R: FloatArray, t: FloatArray) -> Pose:
         """Build from arrays already known to be a finite float64 (3, 3) and (3,) (results of
         composing or inverting valid poses), skipping validation on this hot path."""
         pose = object.__new__(cls)
@@ -109,11 +109,11 @@ class Pose:
 
     def inverse(self) -> Pose:
         Rt = self.R.T
-        return Pose._trusted(Rt, -(Rt @ self.t))
+        return Pose.unchecked(Rt, -(Rt @ self.t))
 
     def compose(self, other: Pose) -> Pose:
         """self ∘ other: T_a_b.compose(T_b_c) = T_a_c."""
-        return Pose._trusted(self.R @ other.R, self.R @ other.t + self.t)
+        return Pose.unchecked(self.R @ other.R, self.R @ other.t + self.t)
 
     def apply(self, points: FloatArray) -> FloatArray:
         """points: (N, 3) in frame b -> (N, 3) in frame a."""

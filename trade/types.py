@@ -48,8 +48,8 @@ class BBox:
 
 def iou(a: npt.ArrayLike, b: npt.ArrayLike) -> float:
     """IoU of two (x, y, w, h) boxes; 0.0 when either is missing (NaN) or empty."""
-    ax, ay, aw, ah = (float(v) for v in np.asarray(a, dtype=np.float64).reshape(4))
-    bx, by, bw, bh = (float(v) for v in np.asarray(b, dtype=np.float64).reshape(4))
+    ax, ay, aw, ah = (float(v) for v in a)
+    bx, by, bw, bh = (float(v) for v in b)
     if not all(math.isfinite(v) for v in (ax, ay, aw, ah, bx, by, bw, bh)):
         return 0.0
     ix = max(0.0, min(ax + aw, bx + bw) - max(ax, bx))

@@ -18,7 +18,7 @@ from trade.geometry import Pose
 from trade.types import iou, iou_many
 from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
-from trade_gym.ground_truth import GroundTruth, VehicleBox, compute_ground_truth
+from trade_gym.ground_truth import GroundTruth, VehicleBox, box_corners, compute_ground_truth
 from trade_gym.observation import build_observation, observation_space
 from trade_gym.perception.base import PerceptionOutput, SensorFrame
 from trade_gym.perception.factory import make_perception
@@ -131,6 +131,7 @@ class TradeFollowEnv(gym.Env):
         self.imu.reset(0.0, rng)
         self.pose_source = make_pose_source(self.config.pose_source, rng=rng)
         self._t_s = 0.0
+        self._cache_parked_decoys()
         self._steps = 0
         self._distance_flown_m = 0.0
         self._state = self.quadrotor.read_state()
@@ -241,14 +242,13 @@ class TradeFollowEnv(gym.Env):
         frame = self.camera.render(T_world_cam) if self.config.needs_rendering else None
         self._last_frame = frame
         target_box = self._vehicle_box(self.world.target)
-        decoys = [self._vehicle_box(d) for d in self.world.decoys]
         truth = compute_ground_truth(
             self._client,
             self.camera.intrinsics,
             T_world_cam,
             target_box,
             self.world.target_velocity_mps(self._t_s),
-            decoys,
+            self._vehicle_corners(target_box) if frame is None else np.zeros((0, 8, 3)),
             None if frame is None else frame.seg,
             self.world.target.body_id,
             [d.body_id for d in self.world.decoys],
@@ -257,6 +257,19 @@ class TradeFollowEnv(gym.Env):
         T_est = self.pose_source.estimate(T_world_cam, self._distance_flown_m)
         sensors = SensorFrame(self._t_s, None if frame is None else frame.rgb, T_est, self.imu.read())
         return sensors, truth
+
+    def _vehicle_corners(self, target_box: VehicleBox) -> np.ndarray:
+        """(1 + D, 8, 3) world corners of the target and the decoys; parked decoys' corners are
+        computed once per episode."""
+        corners = self._decoy_corners
+        for i, decoy in self._moving_decoys:
+            corners[i] = box_corners(self._vehicle_box(decoy))
+        return np.concatenate([box_corners(target_box)[None], corners])
+
+    def _cache_parked_decoys(self) -> None:
+        decoys = self.world.decoys
+        self._moving_decoys = [(i, d) for i, d in enumerate(decoys) if d.motion.is_moving]
+        self._decoy_corners = np.array([box_corners(self._vehicle_box(d)) for d in decoys]).reshape(-1, 8, 3)
 
     def _vehicle_box(self, vehicle) -> VehicleBox:
         position, R = self.world.vehicle_pose(vehicle, self._t_s)

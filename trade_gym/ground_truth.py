@@ -16,9 +16,10 @@ from trade.geometry import CameraIntrinsics, Pose
 
 FloatArray = npt.NDArray[np.float64]
 
-# Target visibility is measured on a grid of points inside the vehicle's box, shrunk
-# slightly so the points sit just inside its surfaces.
+# Target visibility is measured on a 3 x 3 grid of points in two layers of the vehicle's box
+# (its middle and just under its top), shrunk slightly so the points sit inside its surfaces.
 VISIBILITY_GRID_STEPS = 3
+VISIBILITY_LAYERS_Z = (0.0, 1.0)  # box-normalised heights of the two layers
 VISIBILITY_SHRINK = 0.9
 # A ray that gets this close to its end point without hitting anything static is clear.
 RAY_CLEAR_FRACTION = 0.999
@@ -27,7 +28,7 @@ MAX_RAY_LENGTH_M = 2000.0
 
 _UNIT_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64)
 _grid = np.linspace(-1.0, 1.0, VISIBILITY_GRID_STEPS)
-_UNIT_GRID = np.array([[x, y, z] for x in _grid for y in _grid for z in _grid]) * VISIBILITY_SHRINK
+_UNIT_GRID = np.array([[x, y, z] for x in _grid for y in _grid for z in VISIBILITY_LAYERS_Z]) * VISIBILITY_SHRINK
 
 
 @dataclass(frozen=True)
@@ -58,22 +59,21 @@ class GroundTruth:
     ground_point_m: FloatArray  # (3,) world point of that surface hit, NaN if none
 
 
-def projected_boxes(K: CameraIntrinsics, T_cam_world: Pose, boxes: list[VehicleBox]) -> FloatArray:
-    """(B, 4) image boxes (x, y, w, h) of the vehicles' projected 3D corners, clipped to the image;
-    NaN rows for boxes out of view or with a corner behind the camera. One vectorised projection."""
-    if not boxes:
+def box_corners(box: VehicleBox) -> FloatArray:
+    """(8, 3) world corners [m] of a vehicle's box."""
+    return box.points(_UNIT_CORNERS)
+
+
+def projected_boxes(K: CameraIntrinsics, T_cam_world: Pose, corners_world: FloatArray) -> FloatArray:
+    """(B, 4) image boxes (x, y, w, h) of vehicles given their world corners (B, 8, 3) [m], clipped
+    to the image; NaN rows for boxes out of view or with a corner behind the camera."""
+    if len(corners_world) == 0:
         return np.zeros((0, 4))
-    centres = np.array([b.center_m for b in boxes])  # (B, 3)
-    rotations = np.array([b.R_world_vehicle for b in boxes])  # (B, 3, 3)
-    halves = np.array([b.half_extents_m for b in boxes])  # (B, 3)
-    # corner_k = c + R (u_k * h), for the 8 unit corners u_k of every box
-    local = _UNIT_CORNERS[None, :, :] * halves[:, None, :]  # (B, 8, 3)
-    corners = (np.einsum("bij,bkj->bki", rotations, local) + centres[:, None, :]).reshape(-1, 3)
-    cam = corners @ T_cam_world.R.T + T_cam_world.t
-    z = cam[:, 2].reshape(-1, 8)
+    cam = corners_world @ T_cam_world.R.T + T_cam_world.t  # (B, 8, 3)
+    z = cam[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = (K.fx_px * cam[:, 0] / cam[:, 2] + K.cx_px).reshape(-1, 8)
-        v = (K.fy_px * cam[:, 1] / cam[:, 2] + K.cy_px).reshape(-1, 8)
+        u = K.fx_px * cam[..., 0] / z + K.cx_px
+        v = K.fy_px * cam[..., 1] / z + K.cy_px
     x0 = np.maximum(u.min(axis=1), -0.5)
     y0 = np.maximum(v.min(axis=1), -0.5)
     x1 = np.minimum(u.max(axis=1), K.width_px - 0.5)
@@ -103,12 +103,14 @@ def segmentation_boxes(seg: npt.NDArray[np.int32], body_ids: npt.ArrayLike) -> F
 
 
 def visible_fraction(
-    client_id: int, K: CameraIntrinsics, T_world_cam: Pose, box: VehicleBox
+    client_id: int, K: CameraIntrinsics, T_world_cam: Pose, box: VehicleBox,
+    T_cam_world: Pose | None = None,
 ) -> float:
     """Fraction of sample points inside the target's box that are in the image and not hidden by
     terrain or buildings (vehicles carry no collision shape, so rays pass through them)."""
     pts = box.points(_UNIT_GRID)
-    uv = K.project(T_world_cam.inverse().apply(pts))
+    T_cam_world = T_world_cam.inverse() if T_cam_world is None else T_cam_world
+    uv = K.project(T_cam_world.apply(pts))
     in_image = (
         np.isfinite(uv[:, 0])
         & (uv[:, 0] >= -0.5) & (uv[:, 0] <= K.width_px - 0.5)
@@ -150,23 +152,24 @@ def compute_ground_truth(
     T_world_cam: Pose,
     target: VehicleBox,
     target_velocity_mps: FloatArray,
-    decoys: list[VehicleBox],
+    vehicle_corners_m: FloatArray,
     seg: npt.NDArray[np.int32] | None,
     target_body_id: int,
     decoy_body_ids: list[int],
     max_range_m: float,
 ) -> GroundTruth:
-    """All ground truth of one frame; `seg` is the rendered mask or None (projected boxes)."""
+    """All ground truth of one frame. vehicle_corners_m: (1 + D, 8, 3) world corners of the target
+    then the decoys (used when `seg`, the rendered mask, is None: boxes are then projected)."""
     T_cam_world = T_world_cam.inverse()
     if seg is not None:
         boxes = segmentation_boxes(seg, [target_body_id, *decoy_body_ids])
         target_bbox, decoy_bboxes = boxes[0], boxes[1:]
     else:
-        boxes = projected_boxes(K, T_cam_world, [target, *decoys])
+        boxes = projected_boxes(K, T_cam_world, vehicle_corners_m)
         target_bbox, decoy_bboxes = boxes[0], boxes[1:]
     target_cam = T_cam_world.apply(target.center_m.reshape(1, 3))
     target_depth = float(target_cam[0, 2])
-    fraction = visible_fraction(client_id, K, T_world_cam, target)
+    fraction = visible_fraction(client_id, K, T_world_cam, target, T_cam_world)
     centre = target_bbox[:2] + target_bbox[2:] / 2.0
     ground_depth, ground_point = ground_hit(client_id, K, T_world_cam, centre, max_range_m)
     return GroundTruth(

@@ -7,9 +7,8 @@ height above the target), `effort` (minus the mean squared action) and `crash`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-
-import numpy as np
 
 from trade_gym.perception.base import FloatArray
 
@@ -37,8 +36,10 @@ def compute_reward(
 ) -> tuple[float, dict[str, float]]:
     """(total, terms). target_pixel: (2,) projected target centre [px], NaN when behind the camera."""
     half = image_size_px / 2.0
-    if target_visible and np.all(np.isfinite(target_pixel)):
-        offset = float(np.linalg.norm((target_pixel - (half - 0.5)) / half))
+    u, v = float(target_pixel[0]), float(target_pixel[1])
+    if target_visible and math.isfinite(u) and math.isfinite(v):
+        # distance from the principal point (half - 0.5, half - 0.5) in half-image units
+        offset = math.hypot(u - (half - 0.5), v - (half - 0.5)) / half
         centering = -min(offset, 1.0)
     else:
         centering = -1.0
@@ -47,7 +48,7 @@ def compute_reward(
         "visible": config.visible_weight * float(target_visible),
         "centering": config.centering_weight * centering,
         "altitude": -config.altitude_weight * min(altitude_error, 1.0),
-        "effort": -config.effort_weight * float(np.mean(np.square(action))),
+        "effort": -config.effort_weight * sum(float(a) * float(a) for a in action) / len(action),
         "crash": -config.crash_penalty * float(crashed),
     }
     return float(sum(terms.values())), terms

@@ -127,7 +127,10 @@ class Camera:
 
     def pose(self, R_world_body: npt.ArrayLike, position_m: npt.ArrayLike) -> Pose:
         """T_world_cam from the body attitude (3, 3) and position (3,) world [m]."""
-        return Pose(np.asarray(R_world_body), np.asarray(position_m)).compose(self.T_body_cam)
+        R = np.asarray(R_world_body, dtype=np.float64)
+        t = np.asarray(position_m, dtype=np.float64)
+        # T_world_cam = T_world_body T_body_cam: R_wc = R_wb R_bc, t_wc = R_wb t_bc + t_wb
+        return Pose.unchecked(R @ self.T_body_cam.R, R @ self.T_body_cam.t + t)
 
     def render(self, T_world_cam: Pose) -> CameraFrame:
         """Render RGB, camera-frame z depth [m] and body-id segmentation from `T_world_cam`."""
