@@ -52,11 +52,13 @@ class CameraIntrinsics:
         """points_cam: (N, 3) camera frame [m] -> (N, 2) pixels; NaN where z <= 0."""
         pts = np.atleast_2d(np.asarray(points_cam, dtype=np.float64))
         z = pts[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = self.fx_px * pts[:, 0] / z + self.cx_px
-            v = self.fy_px * pts[:, 1] / z + self.cy_px
-        uv = np.stack([u, v], axis=1)
-        uv[~(z > 0)] = np.nan
+        ahead = z > 0
+        # divide by a safe depth (1 where the point is not ahead), then mark those points NaN
+        inv_z = 1.0 / np.where(ahead, z, 1.0)
+        uv = np.empty((len(pts), 2))
+        uv[:, 0] = self.fx_px * pts[:, 0] * inv_z + self.cx_px
+        uv[:, 1] = self.fy_px * pts[:, 1] * inv_z + self.cy_px
+        uv[~ahead] = np.nan
         return uv
 
     def rays(self, pixels: FloatArray) -> FloatArray:

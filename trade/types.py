@@ -75,17 +75,3 @@ class ImuBatch:
     def empty(cls) -> ImuBatch:
         return cls(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
 
-
-def iou_many(boxes: npt.ArrayLike, box: npt.ArrayLike) -> FloatArray:
-    """IoU of each row of `boxes` (N, 4) with one `box` (4,); 0 where either is missing (NaN)."""
-    a = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
-    b = np.asarray(box, dtype=np.float64).reshape(4)
-    if len(a) == 0 or not np.all(np.isfinite(b)):
-        return np.zeros(len(a))
-    ix = np.clip(np.minimum(a[:, 0] + a[:, 2], b[0] + b[2]) - np.maximum(a[:, 0], b[0]), 0.0, None)
-    iy = np.clip(np.minimum(a[:, 1] + a[:, 3], b[1] + b[3]) - np.maximum(a[:, 1], b[1]), 0.0, None)
-    inter = ix * iy
-    union = a[:, 2] * a[:, 3] + b[2] * b[3] - inter
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out = np.where(union > 0, inter / union, 0.0)
-    return np.where(np.all(np.isfinite(a), axis=1), out, 0.0)

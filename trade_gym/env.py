@@ -15,7 +15,7 @@ import pybullet as p
 from gymnasium import spaces
 
 from trade.geometry import Pose
-from trade.types import iou, iou_many
+from trade.types import iou
 from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.ground_truth import GroundTruth, VehicleBox, box_corners, compute_ground_truth
@@ -298,7 +298,8 @@ class TradeFollowEnv(gym.Env):
     def _info(self, truth: GroundTruth, estimate: PerceptionOutput, crashed: bool,
               terms: dict[str, float] | None) -> dict[str, Any]:
         est_iou = iou(truth.target_bbox, estimate.bbox)
-        best_decoy = float(iou_many(truth.decoy_bboxes, estimate.bbox).max(initial=0.0))
+        # decoys in view only (usually none or a few): scalar IoU beats array set-up here
+        best_decoy = max((iou(d, estimate.bbox) for d in truth.decoy_bboxes if d[0] == d[0]), default=0.0)
         drone = self._state.position_m
         info: dict[str, Any] = {
             "t_s": self._t_s,
