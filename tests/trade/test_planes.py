@@ -197,3 +197,21 @@ def test_multi_ransac_too_few_or_collinear_points_returns_none(pts: np.ndarray) 
 def test_select_ground_vertical_planes_fall_back_to_flattest() -> None:
     wall, slope = Plane(np.array([1.0, 0.0, 0.0]), 0.0), tilted(60.0)
     assert select_ground((wall, slope), QUERY_XY, 3.0) == 1
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_multi_ransac_paper_rule_ground_majority_with_roof_30m_up_and_30pct_outliers(seed: int) -> None:
+    """The configuration the pipeline runs (paper rule): 40 % ground, 30 % roof 30 m higher, 30 %
+    outliers; the ground is found within 1 deg and 0.1 m."""
+    from trade.pipeline import PAPER_RANSAC
+
+    rng = np.random.default_rng(seed)
+    ground = Plane(np.array([0.0, 0.0, 1.0]), 0.0)
+    grd = plane_points(rng, 120, ground, 0.0, 20.0)
+    roof = plane_points(rng, 90, Plane(np.array([0.0, 0.0, 1.0]), -30.0), -20.0, -5.0)
+    outliers = np.c_[rng.uniform(-20.0, 20.0, (90, 2)), rng.uniform(-5.0, 35.0, 90)]
+    res = multi_ransac(np.r_[grd, roof, outliers], PAPER_RANSAC, np.random.default_rng(100 + seed), QUERY_XY)
+    assert res is not None
+    assert angle_deg(res.selected, ground) < 1.0
+    assert abs(res.selected.height_at(QUERY_XY)) < 0.1
+    assert res.inlier_mask[:120].mean() > 0.95 and res.inlier_mask[120:210].mean() < 0.05
