@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 from dataclasses import fields
 from pathlib import Path
@@ -57,7 +58,8 @@ def profile(scene: str, steps: int, camera_size: int, seed: int) -> dict:
     table["stack_total_ms"] = _summary(stack)
     table["render_ms"] = _summary(render_ms[1:])  # the first render belongs to reset
     table["env_step_ms"] = _summary(step_ms)
-    return {"scene": scene, "camera_size": camera_size, "steps": len(step_ms), "ms_per_frame": table}
+    return {"scene": scene, "camera_size": camera_size, "steps": len(step_ms), "ms_per_frame": table,
+            "load_average_1min_at_end": round(os.getloadavg()[0], 2)}
 
 
 def _summary(values) -> dict[str, float]:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import subprocess
 import time
@@ -94,6 +95,8 @@ def main() -> None:
             "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "cpu": platform.processor() or platform.machine(),
             "python": platform.python_version(),
+            "load_average_1min_at_end": round(os.getloadavg()[0], 2),
+            "cores": os.cpu_count(),
         },
     }
     print(json.dumps(result, indent=2))
