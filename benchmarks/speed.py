@@ -21,10 +21,17 @@ from agents import ScriptedFollower
 from trade_gym.env import TradeFollowEnv
 
 
-def _steps_per_s(env: TradeFollowEnv, n_steps: int, seed: int) -> tuple[float, float]:
-    """(env.step calls per second, mean reset time [ms]) with the scripted follower flying, so
-    episodes run their full length; only the time inside step() and reset() is counted."""
-    policy = ScriptedFollower()
+class Hover:
+    """Zero action: the drone hovers and the target soon leaves the view."""
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        return np.zeros(4, np.float32), state
+
+
+def _steps_per_s(env: TradeFollowEnv, n_steps: int, seed: int, policy_name: str = "scripted") -> tuple[float, float]:
+    """(env.step calls per second, mean reset time [ms]) under the named policy; with the scripted
+    follower episodes run their full length; only the time inside step() and reset() is counted."""
+    policy = ScriptedFollower() if policy_name == "scripted" else Hover()
     step_s = reset_s = 0.0
     resets = 0
     start = time.perf_counter()
@@ -70,12 +77,13 @@ def main() -> None:
     parser.add_argument("--render-steps", type=int, default=100)
     parser.add_argument("--scene", default="desert")
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--policy", choices=("scripted", "hover"), default="scripted")
     args = parser.parse_args()
 
     oracle = TradeFollowEnv(scene=args.scene, perception="oracle", camera_size=256)
     rendering = TradeFollowEnv(scene=args.scene, perception="oracle", camera_size=256, render_mode="rgb_array")
     try:
-        oracle_sps, reset_ms = _steps_per_s(oracle, args.steps, seed=0)
+        oracle_sps, reset_ms = _steps_per_s(oracle, args.steps, seed=0, policy_name=args.policy)
         render_sps, _ = _steps_per_s(rendering, args.render_steps, seed=0)
         render_ms = _render_ms(rendering, args.render_steps, seed=0)
     finally:
@@ -83,6 +91,7 @@ def main() -> None:
         rendering.close()
     result = {
         "scene": args.scene,
+        "policy": args.policy,
         "oracle_steps_per_s": round(oracle_sps, 1),
         "reset_ms": round(reset_ms, 1),
         "rendering_steps_per_s_256": round(render_sps, 2),

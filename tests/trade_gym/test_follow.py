@@ -6,27 +6,13 @@ import numpy as np
 import pytest
 
 from agents import ScriptedFollower
-from trade_gym.env import TradeFollowEnv
+from trade_gym.rollout import run_episode
 
 MIN_VISIBLE_FRACTION = 0.95
 
 
 def fly_episode(scene: str, seed: int, **kwargs) -> list[dict]:
-    env = TradeFollowEnv(scene=scene, **kwargs)
-    policy = ScriptedFollower()
-    infos = []
-    try:
-        obs, _ = env.reset(seed=seed)
-        start = True
-        while True:
-            action, _ = policy.predict(obs, episode_start=np.array([start]))
-            start = False
-            obs, _, terminated, truncated, info = env.step(action)
-            infos.append(info)
-            if terminated or truncated:
-                return infos
-    finally:
-        env.close()
+    return run_episode(ScriptedFollower(), seed, scene=scene, **kwargs)
 
 
 @pytest.mark.parametrize("scene", ["desert", "city", "mountain"])

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from tests.trade_gym.test_follow import fly_episode
+from trade_gym import metrics
 
 STEPS = 300
 MAX_GROUND_RMSE_M = 0.5
@@ -16,17 +16,12 @@ TRACKED_IOU = 0.3
 def desert_metrics(seed: int, perception: str = "trade") -> dict[str, float]:
     infos = fly_episode("desert", seed, perception=perception, camera_size=256, pose_source="gt",
                         episode_duration_s=STEPS / 30.0)
-    ious = np.array([i["iou"] for i in infos])
-    visible = np.array([i["target_visible"] for i in infos])
-    ground = np.array([(i["ground_depth_est"], i["ground_depth_gt"]) for i in infos])
-    both = np.all(np.isfinite(ground), axis=1)
-    on_decoy = np.array([i["on_decoy"] for i in infos])
     return {
         "steps": len(infos),
-        "tracked": float(np.mean(ious[visible] >= TRACKED_IOU)),
-        "ground_rmse_m": float(np.sqrt(np.mean((ground[both, 0] - ground[both, 1]) ** 2))),
-        "ground_frames": int(both.sum()),
-        "switches": int(on_decoy[0] + np.sum(on_decoy[1:] & ~on_decoy[:-1])),
+        "tracked": metrics.tracked_fraction(infos, TRACKED_IOU),
+        "ground_rmse_m": metrics.depth_rmse(infos, "ground"),
+        "ground_frames": metrics.depth_frames(infos, "ground"),
+        "switches": metrics.decoy_switches(infos),
     }
 
 
