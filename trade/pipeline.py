@@ -15,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from trade.geometry import CameraIntrinsics, Pose
+from trade.ground_filter import DepthPredictor, GroundFilter, GroundFilterConfig
 from trade.planes import MultiRansacConfig, Plane, multi_ransac
 from trade.raycast import RaycastConfig, depth_uncertainty, raycast_plane
 from trade.roi_features import RoiConfig, RoiFeatures, RoiFeatureTracker
@@ -44,11 +45,12 @@ class PipelineConfig:
     ransac: MultiRansacConfig = PAPER_RANSAC
     fusion: TemporalFusionConfig = field(default_factory=lambda: TemporalFusionConfig(ransac=PAPER_RANSAC))
     raycast: RaycastConfig = field(default_factory=RaycastConfig)
+    ground_filter: GroundFilterConfig = field(default_factory=GroundFilterConfig)
     trajectory_guidance: bool = True  # False: the "dcf" baseline (window on the last box, top peak)
     box_refinement: bool = True  # fit the box to the target's colour blob (the DCF keeps its aspect)
     temporal_fusion: bool = True
-    ground_mask: bool = False  # needs single-image depth (not part of this stack yet)
-    single_image_depth: bool = False
+    ground_mask: bool = False  # plane fit only on tracks the single-image-depth ground mask keeps
+    single_image_depth: bool = False  # depth-only mode of the paper's Table 2 (not available yet)
     object_height_m: float = 1.5  # prior object height; the plane is lifted by half of it
     min_plane_points: int = 10  # promoted ROI points a frame needs for its own plane fit
     min_peak_score: float = 0.15  # below: the target is lost this frame and the estimate coasts
@@ -56,12 +58,9 @@ class PipelineConfig:
     trajectory_preview_points: int = 10
 
     def __post_init__(self) -> None:
-        if self.ground_mask or self.single_image_depth:
-            raise ValueError(
-                "ground_mask and single_image_depth need the single-image depth model, which this "
-                f"stack does not ship yet; got ground_mask={self.ground_mask!r}, "
-                f"single_image_depth={self.single_image_depth!r}"
-            )
+        if self.single_image_depth:
+            raise ValueError("single_image_depth (the depth-only mode of Table 2) is not available yet; "
+                             f"got single_image_depth={self.single_image_depth!r}")
         if not (math.isfinite(self.object_height_m) and self.object_height_m >= 0):
             raise ValueError(f"PipelineConfig.object_height_m must be finite and >= 0, got {self.object_height_m!r}")
         if int(self.min_plane_points) != self.min_plane_points or self.min_plane_points < 3:
@@ -80,11 +79,12 @@ class StageTimings:
     fusion_ms: float = 0.0
     raycast_ms: float = 0.0
     trajectory_ms: float = 0.0
+    ground_mask_ms: float = 0.0  # single-image depth, alignment and segmentation (when they ran)
 
     @property
     def total_ms(self) -> float:
         return (self.tracker_ms + self.roi_ms + self.plane_ms + self.fusion_ms + self.raycast_ms
-                + self.trajectory_ms)
+                + self.trajectory_ms + self.ground_mask_ms)
 
 
 @dataclass(frozen=True, eq=False)
@@ -112,7 +112,10 @@ class Estimate:
 class TradePipeline:
     """Tracking with trajectory estimates plus robust 3D localisation (paper sections 3-4)."""
 
-    def __init__(self, config: PipelineConfig, intrinsics: CameraIntrinsics, rng: np.random.Generator) -> None:
+    def __init__(self, config: PipelineConfig, intrinsics: CameraIntrinsics, rng: np.random.Generator,
+                 depth_model: DepthPredictor | None = None) -> None:
+        if config.ground_mask and depth_model is None:
+            raise ValueError("ground_mask=True needs a single-image depth model (depth_model=None given)")
         self.config = config
         self.intrinsics = intrinsics
         self._rng = rng
@@ -122,6 +125,9 @@ class TradePipeline:
         self.trajectory = TrajectoryModel(config.trajectory)
         self.roi = RoiFeatureTracker(config.roi, intrinsics)
         self.fusion = TemporalPlaneFusion(config.fusion, rng)
+        self.ground = (GroundFilter(config.ground_filter, intrinsics, depth_model, rng)
+                       if config.ground_mask else None)
+        self._object_height_m = config.object_height_m
         self._t_s = 0.0
         self._initialised = False
 
@@ -134,12 +140,15 @@ class TradePipeline:
         self.trajectory = TrajectoryModel(self.config.trajectory)
         self.roi.reset()
         self.fusion.reset()
+        if self.ground is not None:
+            self.ground.reset()
+        self._object_height_m = self.config.object_height_m
         self._t_s = t_s
         self._initialised = True
         start = time.perf_counter()
         roi = self.roi.step(cv2.cvtColor(image_rgb, cv2.COLOR_RGB2GRAY), box, T_world_cam)
         roi_ms = (time.perf_counter() - start) * 1e3
-        return self._localise(t_s, box, True, 1.0, False, np.full(2, np.nan), roi, T_world_cam,
+        return self._localise(image_rgb, t_s, box, True, 1.0, False, np.full(2, np.nan), roi, T_world_cam,
                               StageTimings(roi_ms=roi_ms))
 
     def step(self, image_rgb: npt.NDArray[np.uint8], T_world_cam: Pose, t_s: float,
@@ -168,7 +177,7 @@ class TradePipeline:
         start = time.perf_counter()
         roi = self.roi.step(cv2.cvtColor(image_rgb, cv2.COLOR_RGB2GRAY), box, T_world_cam)
         roi_ms = (time.perf_counter() - start) * 1e3
-        return self._localise(t_s, box if tracked else None, tracked, choice.score, choice.ambiguous,
+        return self._localise(image_rgb, t_s, box if tracked else None, tracked, choice.score, choice.ambiguous,
                               predicted_px, roi, T_world_cam, StageTimings(tracker_ms=tracker_ms, roi_ms=roi_ms))
 
     # ------------------------------------------------------------------ stages
@@ -214,12 +223,27 @@ class TradePipeline:
             return last
         return BBox.from_center(predicted_px[0], predicted_px[1], last.w_px, last.h_px)
 
-    def _localise(self, t_s: float, box: BBox | None, tracked: bool, score: float, ambiguous: bool,
-                  predicted_px: FloatArray, roi: RoiFeatures, T_world_cam: Pose,
+    def _ground_points(self, image_rgb: npt.NDArray[np.uint8], box: BBox | None, roi: RoiFeatures,
+                       T_world_cam: Pose) -> tuple[FloatArray, float]:
+        """Promoted ROI points for the plane fit (only those on the ground mask when it is on) and
+        the ground filter's time [ms]."""
+        keep = roi.promoted.copy()
+        ground_ms = 0.0
+        if self.ground is not None and box is not None:
+            labels = self.ground.update(image_rgb, roi, box, T_world_cam)
+            ground_ms = labels.model_ms + labels.segmentation_ms
+            if labels.ground is not None:
+                keep &= labels.ground  # before the first mask every promoted point is used
+            if labels.object_height_m is not None:
+                self._object_height_m = labels.object_height_m
+        points = roi.points_world[keep]
+        return points[np.all(np.isfinite(points), axis=1)], ground_ms
+
+    def _localise(self, image_rgb: npt.NDArray[np.uint8], t_s: float, box: BBox | None, tracked: bool,
+                  score: float, ambiguous: bool, predicted_px: FloatArray, roi: RoiFeatures, T_world_cam: Pose,
                   timings: StageTimings) -> Estimate:
         cfg = self.config
-        points = roi.points_world[roi.promoted]
-        points = points[np.all(np.isfinite(points), axis=1)]
+        points, ground_ms = self._ground_points(image_rgb, box, roi, T_world_cam)
         start = time.perf_counter()
         query_xy = T_world_cam.t[:2]
         frame_fit = multi_ransac(points, cfg.ransac, self._rng, query_xy) if len(points) >= cfg.min_plane_points \
@@ -237,10 +261,11 @@ class TradePipeline:
         position = np.full(3, np.nan)
         depth = sigma = float("nan")
         if box is not None and plane is not None:
-            hit = raycast_plane(self.intrinsics, T_world_cam, box.center, plane, cfg.object_height_m, cfg.raycast)
+            height = self._object_height_m
+            hit = raycast_plane(self.intrinsics, T_world_cam, box.center, plane, height, cfg.raycast)
             if hit.valid:
                 spread = depth_uncertainty(self.intrinsics, T_world_cam, box.center, solutions or (plane,),
-                                           cfg.object_height_m, cfg.raycast)
+                                           height, cfg.raycast)
                 position, depth = hit.point_world, hit.depth_m
                 sigma = spread.sigma_m if spread.valid else cfg.raycast.min_depth_sigma_m
         raycast_ms = (time.perf_counter() - start) * 1e3
@@ -252,7 +277,8 @@ class TradePipeline:
         if state is not None and not np.isfinite(depth):
             # Coasting: report the depth of the trajectory model's position.
             depth = float(T_world_cam.inverse().apply(state[0].reshape(1, 3))[0, 2])
-        timings = StageTimings(timings.tracker_ms, timings.roi_ms, plane_ms, fusion_ms, raycast_ms, trajectory_ms)
+        timings = StageTimings(timings.tracker_ms, timings.roi_ms, plane_ms, fusion_ms, raycast_ms, trajectory_ms,
+                               ground_ms)
         return Estimate(
             t_s=t_s,
             box=box,

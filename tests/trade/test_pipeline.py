@@ -77,6 +77,12 @@ def test_pipeline_rejects_time_going_backwards_and_bad_images():
         pipeline.step(image.astype(np.float32), scene.camera_pose(cam), 2.0)
 
 
-def test_pipeline_config_rejects_unavailable_ablation():
-    with pytest.raises(ValueError, match="ground_mask"):
-        PipelineConfig(ground_mask=True)
+def test_pipeline_config_rejects_unavailable_depth_only_mode():
+    with pytest.raises(ValueError, match="single_image_depth"):
+        PipelineConfig(single_image_depth=True)
+
+
+def test_pipeline_ground_mask_without_depth_model_is_refused():
+    scene = PlanarScene.make(size_px=64)
+    with pytest.raises(ValueError, match="depth model"):
+        TradePipeline(PipelineConfig(ground_mask=True), scene.intrinsics, np.random.default_rng(0))

@@ -13,6 +13,7 @@ import numpy.typing as npt
 from trade.geometry import CameraIntrinsics
 from trade.pipeline import Estimate, PipelineConfig, TradePipeline
 from trade.raycast import raycast_plane
+from trade.single_image_depth import SingleImageDepth
 from trade.types import BBox
 from trade_gym.config import EnvConfig
 from trade_gym.ground_truth import GroundTruth
@@ -42,6 +43,8 @@ class TradePerception:
     def __init__(self, config: EnvConfig, intrinsics: CameraIntrinsics) -> None:
         self.pipeline_config = pipeline_config(config)
         self.intrinsics = intrinsics
+        # The shipped single-image depth model, loaded (and its SHA-256 checked) once per env.
+        self.depth_model = SingleImageDepth() if self.pipeline_config.ground_mask else None
         self.pipeline: TradePipeline | None = None
         self.last: Estimate | None = None
         self._T_world_cam = None
@@ -52,7 +55,7 @@ class TradePerception:
             raise RuntimeError("the trade perception needs rendered frames")
         if not np.all(np.isfinite(init_box)):
             raise RuntimeError("the target is not in view at reset; cannot initialise the tracker")
-        self.pipeline = TradePipeline(self.pipeline_config, self.intrinsics, rng)
+        self.pipeline = TradePipeline(self.pipeline_config, self.intrinsics, rng, self.depth_model)
         self.last = self.pipeline.initialise(sensors.rgb, BBox.from_array(init_box), sensors.T_world_cam,
                                              sensors.t_s)
         self._T_world_cam = sensors.T_world_cam

@@ -1,0 +1,120 @@
+"""Which ROI feature tracks lie on the ground plane: single-image depth, affine alignment, segmentation.
+
+Every `every_n_frames` frames the depth model runs, its map is aligned to the ROI features' metric
+depths (affine RANSAC in inverse depth), the ground is segmented around the box, and each live track
+is labelled ground or not; labels persist with the track until the next model run.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from trade.depth_alignment import AffineFitConfig, align_model_depth
+from trade.geometry import CameraIntrinsics, Pose
+from trade.ground_segmentation import GroundMask, GroundSegmentationConfig, points_in_mask, segment_ground
+from trade.roi_features import RoiFeatures
+from trade.types import BBox
+
+BoolArray = npt.NDArray[np.bool_]
+
+
+class DepthPredictor(Protocol):
+    """Relative inverse depth of an RGB image: (H, W, 3) uint8 -> (H, W) float32."""
+
+    def predict(self, rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]: ...
+
+
+@dataclass(frozen=True)
+class GroundFilterConfig:
+    """Cadence of the depth model and the configs of alignment and segmentation."""
+
+    every_n_frames: int = 3  # run the model on every n-th frame (10 Hz at a 30 Hz camera)
+    min_promoted_features: int = 8  # converged ROI depths needed to align the model's map
+    object_height_smoothing: float = 0.3  # weight of a new height estimate in the running mean
+    alignment: AffineFitConfig = field(default_factory=AffineFitConfig)
+    segmentation: GroundSegmentationConfig = field(default_factory=GroundSegmentationConfig)
+
+    def __post_init__(self) -> None:
+        if int(self.every_n_frames) != self.every_n_frames or self.every_n_frames < 1:
+            raise ValueError(f"GroundFilterConfig.every_n_frames must be an integer >= 1, got {self.every_n_frames!r}")
+        if int(self.min_promoted_features) != self.min_promoted_features or self.min_promoted_features < 2:
+            raise ValueError("GroundFilterConfig.min_promoted_features must be an integer >= 2, "
+                             f"got {self.min_promoted_features!r}")
+        if not 0.0 < self.object_height_smoothing <= 1.0:
+            raise ValueError("GroundFilterConfig.object_height_smoothing must be in (0, 1], "
+                             f"got {self.object_height_smoothing!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class GroundLabels:
+    """ground: (N,) per ROI track, True on the ground; None before the first successful mask.
+    mask: the latest ground mask (or None); ran_model: the model ran this frame."""
+
+    ground: BoolArray | None
+    object_height_m: float | None
+    mask: GroundMask | None
+    ran_model: bool
+    model_ms: float
+    segmentation_ms: float
+
+
+class GroundFilter:
+    """Labels ROI tracks as ground using a single-image depth model (injected)."""
+
+    def __init__(self, config: GroundFilterConfig, intrinsics: CameraIntrinsics, model: DepthPredictor,
+                 rng: np.random.Generator) -> None:
+        self.config = config
+        self.intrinsics = intrinsics
+        self.model = model
+        self._rng = rng
+        self.reset()
+
+    def reset(self) -> None:
+        self._frame = 0
+        self._labels: dict[int, bool] = {}
+        self._object_height_m: float | None = None
+        self._mask: GroundMask | None = None
+
+    def update(self, rgb: npt.NDArray[np.uint8], roi: RoiFeatures, box: BBox, T_world_cam: Pose) -> GroundLabels:
+        """Run the model when due (and enough ROI depths have converged), then label the tracks."""
+        due = self._frame % self.config.every_n_frames == 0
+        self._frame += 1
+        model_ms = seg_ms = 0.0
+        ran = False
+        if due and int(roi.promoted.sum()) >= self.config.min_promoted_features:
+            start = time.perf_counter()
+            model_inv = self.model.predict(rgb)
+            model_ms = (time.perf_counter() - start) * 1e3
+            start = time.perf_counter()
+            self._segment(model_inv, roi, box, T_world_cam)
+            seg_ms = (time.perf_counter() - start) * 1e3
+            ran = True
+        return GroundLabels(self._ground_of(roi), self._object_height_m, self._mask, ran, model_ms, seg_ms)
+
+    def _segment(self, model_inv: npt.NDArray[np.float32], roi: RoiFeatures, box: BBox, T_world_cam: Pose) -> None:
+        promoted = roi.promoted
+        aligned = align_model_depth(model_inv, roi.pixels[promoted], roi.depth_m[promoted], self._rng,
+                                    self.config.alignment)
+        if not aligned.ok:
+            return  # invalid model output or no consistent fit: keep the previous labels
+        mask = segment_ground(aligned.depth_m, self.intrinsics, T_world_cam, box, roi.roi, self.config.segmentation)
+        if mask.plane is None:
+            return
+        self._mask = mask
+        inside = points_in_mask(roi.pixels, mask.mask)
+        self._labels = {int(t): bool(g) for t, g in zip(roi.track_ids, inside)}
+        height = float(mask.object_height_m)
+        if np.isfinite(height):
+            a = self.config.object_height_smoothing
+            self._object_height_m = height if self._object_height_m is None else (1 - a) * self._object_height_m + a * height
+
+    def _ground_of(self, roi: RoiFeatures) -> BoolArray | None:
+        """Labels of the live tracks; tracks born since the last mask are not ground yet."""
+        if self._mask is None:
+            return None
+        return np.array([self._labels.get(int(t), False) for t in roi.track_ids], dtype=bool)
