@@ -108,8 +108,11 @@ class GroundFilter:
         self._mask = mask
         inside = points_in_mask(roi.pixels, mask.mask)
         self._labels = {int(t): bool(g) for t, g in zip(roi.track_ids, inside)}
+        seg = self.config.segmentation
         height = float(mask.object_height_m)
         if np.isfinite(height):
+            # the measured height above the mask plane, kept within the segmentation's plausible range
+            height = min(max(height, seg.min_object_height_m), seg.max_object_height_m)
             a = self.config.object_height_smoothing
             self._object_height_m = height if self._object_height_m is None else (1 - a) * self._object_height_m + a * height
 
