@@ -28,11 +28,14 @@ class Hover:
         return np.zeros(4, np.float32), state
 
 
-def _steps_per_s(env: TradeFollowEnv, n_steps: int, seed: int, policy_name: str = "scripted") -> tuple[float, float]:
-    """(env.step calls per second, mean reset time [ms]) under the named policy; with the scripted
-    follower episodes run their full length; only the time inside step() and reset() is counted."""
+def _steps_per_s(env: TradeFollowEnv, n_steps: int, seed: int,
+                 policy_name: str = "scripted") -> tuple[float, float, float]:
+    """(env.step calls per wall-clock second, per CPU second of this process, mean reset time [ms])
+    under the named policy; with the scripted follower episodes run their full length; only the time
+    inside step() and reset() is counted. CPU time excludes the VM's steal time, which makes
+    wall-clock rates vary by +-30 % on a shared host."""
     policy = ScriptedFollower() if policy_name == "scripted" else Hover()
-    step_s = reset_s = 0.0
+    step_s = reset_s = step_cpu_s = 0.0
     resets = 0
     start = time.perf_counter()
     obs, _ = env.reset(seed=seed)
@@ -42,16 +45,17 @@ def _steps_per_s(env: TradeFollowEnv, n_steps: int, seed: int, policy_name: str 
     for _ in range(n_steps):
         action, _ = policy.predict(obs, episode_start=np.array([first]))
         first = False
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         obs, _, terminated, truncated, _ = env.step(action)
         step_s += time.perf_counter() - start
+        step_cpu_s += time.process_time() - start_cpu
         if terminated or truncated:
             start = time.perf_counter()
             obs, _ = env.reset(seed=seed + resets)
             reset_s += time.perf_counter() - start
             resets += 1
             first = True
-    return n_steps / step_s, reset_s / resets * 1e3
+    return n_steps / step_s, n_steps / step_cpu_s, reset_s / resets * 1e3
 
 
 def _render_ms(env: TradeFollowEnv, n_frames: int, seed: int) -> float:
@@ -83,8 +87,8 @@ def main() -> None:
     oracle = TradeFollowEnv(scene=args.scene, perception="oracle", camera_size=256)
     rendering = TradeFollowEnv(scene=args.scene, perception="oracle", camera_size=256, render_mode="rgb_array")
     try:
-        oracle_sps, reset_ms = _steps_per_s(oracle, args.steps, seed=0, policy_name=args.policy)
-        render_sps, _ = _steps_per_s(rendering, args.render_steps, seed=0)
+        oracle_sps, oracle_cpu_sps, reset_ms = _steps_per_s(oracle, args.steps, seed=0, policy_name=args.policy)
+        render_sps, _, _ = _steps_per_s(rendering, args.render_steps, seed=0)
         render_ms = _render_ms(rendering, args.render_steps, seed=0)
     finally:
         oracle.close()
@@ -93,6 +97,7 @@ def main() -> None:
         "scene": args.scene,
         "policy": args.policy,
         "oracle_steps_per_s": round(oracle_sps, 1),
+        "oracle_steps_per_cpu_s": round(oracle_cpu_sps, 1),
         "reset_ms": round(reset_ms, 1),
         "rendering_steps_per_s_256": round(render_sps, 2),
         "render_only_ms_256": round(render_ms, 2),

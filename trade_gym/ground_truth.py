@@ -6,6 +6,7 @@ the projection of each vehicle's 3D box; visibility always from rays to sample p
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -131,18 +132,20 @@ def ground_hit(
     client_id: int, K: CameraIntrinsics, T_world_cam: Pose, pixel: FloatArray, max_range_m: float
 ) -> tuple[float, FloatArray]:
     """Cast the pixel's ray against static geometry: (camera-frame z [m], world point), NaN if none."""
-    if not np.all(np.isfinite(pixel)):
+    u, v = float(pixel[0]), float(pixel[1])
+    if not (math.isfinite(u) and math.isfinite(v)):
         return float("nan"), np.full(3, np.nan)
-    ray_cam = K.rays(pixel.reshape(1, 2))[0]
-    direction = T_world_cam.R @ (ray_cam / np.linalg.norm(ray_cam))
-    length = min(max_range_m, MAX_RAY_LENGTH_M)
+    # camera ray (x, y, 1) scaled to the ray length; world end = t + R ray
+    x, y = (u - K.cx_px) / K.fx_px, (v - K.cy_px) / K.fy_px
+    scale = min(max_range_m, MAX_RAY_LENGTH_M) / math.sqrt(x * x + y * y + 1.0)
     start = T_world_cam.t
-    end = start + direction * length
+    end = start + T_world_cam.R @ np.array([x * scale, y * scale, scale])
     hit = p.rayTest(start.tolist(), end.tolist(), physicsClientId=client_id)[0]
     if hit[0] < 0:
         return float("nan"), np.full(3, np.nan)
     point = np.asarray(hit[3], dtype=np.float64)
-    depth = float((T_world_cam.R.T @ (point - start))[2])
+    # camera-frame z of the hit = z_cam . (point - t), z_cam the third column of R
+    depth = float(T_world_cam.R[:, 2] @ (point - start))
     return depth, point
 
 

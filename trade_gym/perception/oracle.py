@@ -16,6 +16,7 @@ from trade_gym.ground_truth import GroundTruth
 from trade_gym.perception.base import FloatArray, PerceptionOutput, SensorFrame
 
 MIN_BOX_SIDE_PX = 1.0
+N_NORMAL_DRAWS = 11
 
 
 @dataclass(frozen=True)
@@ -55,10 +56,11 @@ class OraclePerception:
     def step(self, sensors: SensorFrame, truth: GroundTruth) -> PerceptionOutput:
         cfg = self.config
         # Draw every noise term each frame so the random stream does not depend on visibility.
-        box_noise = self._rng.normal(0.0, cfg.box_sigma_px, 4)
-        pos_noise = self._rng.normal(0.0, 1.0, 3)
-        vel_noise = self._rng.normal(0.0, cfg.velocity_sigma_mps, 3)
-        ground_noise = self._rng.normal(0.0, 1.0)
+        draws = self._rng.standard_normal(N_NORMAL_DRAWS)  # one call: box (4), position (3), velocity (3), ground
+        box_noise = draws[0:4] * cfg.box_sigma_px
+        pos_noise = draws[4:7]
+        vel_noise = draws[7:10] * cfg.velocity_sigma_mps
+        ground_noise = float(draws[10])
         dropped = self._rng.random() < cfg.dropout_prob
         if dropped or not np.all(np.isfinite(truth.target_bbox)):
             self._last = _coast(self._last)
