@@ -137,19 +137,6 @@ class Quadrotor:
         self._gravity_z = float(p.getPhysicsEngineParameters(physicsClientId=c)["gravityAccelerationZ"])
         return body
 
-    def place(self, position_m: npt.ArrayLike, yaw_rad: float) -> None:
-        """Move the existing airframe to `position_m` (3,) world [m], level, heading `yaw_rad`, at rest
-        (a reset without creating a body: pybullet does not free shapes on resetSimulation)."""
-        if self.body_id is None:
-            raise RuntimeError("Quadrotor.place() before spawn()")
-        c = self.client_id
-        pos = [float(v) for v in np.asarray(position_m, dtype=np.float64).reshape(3)]
-        quat = p.getQuaternionFromEuler((0.0, 0.0, float(yaw_rad)), physicsClientId=c)
-        p.resetBasePositionAndOrientation(self.body_id, pos, quat, physicsClientId=c)
-        p.resetBaseVelocity(self.body_id, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=c)
-        self._reset_internal(yaw_rad)
-        self._gravity_z = float(p.getPhysicsEngineParameters(physicsClientId=c)["gravityAccelerationZ"])
-
     def set_setpoint(self, velocity_heading_mps: npt.ArrayLike, yaw_rate_radps: float) -> None:
         """velocity_heading_mps: (3,) forward, left, up in the yaw-only heading frame [m/s]; clipped."""
         fwd, left, up = (float(v) for v in np.asarray(velocity_heading_mps, dtype=np.float64).reshape(3))
