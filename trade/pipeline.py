@@ -235,8 +235,8 @@ class TradePipeline:
         if self.ground is not None and box is not None:
             labels = self.ground.update(image_rgb, roi, box, T_world_cam)
             ground_ms = labels.model_ms + labels.segmentation_ms
-            if labels.ground is not None:
-                keep &= labels.ground  # before the first mask every promoted point is used
+            # only tracks the mask labelled ground; none before the first mask (roof points would win)
+            keep &= labels.ground if labels.ground is not None else False
             if labels.object_height_m is not None and self.config.object_height_from_mask:
                 self._object_height_m = labels.object_height_m
         points = roi.points_world[keep]
