@@ -199,11 +199,10 @@ class TradePipeline:
         if not self.config.trajectory_guidance:
             return highest_peak(response, self.config.peaks), response.scale
         choice = select_peak(response, self.config.peaks)
-        top = highest_peak(response, self.config.peaks)
-        scale = response.scale
-        if not np.allclose(choice.location_px, top.location_px):
-            scale = self.tracker.estimate_scale(image_rgb, choice.location_px)
-        return choice, scale
+        # response.scale was estimated at the highest peak; re-estimate only when another peak won
+        if choice.score < float(response.scores.max()):
+            return choice, self.tracker.estimate_scale(image_rgb, choice.location_px)
+        return choice, response.scale
 
     def _refine_box(self, image_rgb: npt.NDArray[np.uint8], dcf_box: BBox, learn: bool) -> BBox:
         """The output box: the target's colour blob around the DCF centre when that blob is plausible,

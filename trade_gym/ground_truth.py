@@ -57,7 +57,6 @@ class GroundTruth:
     target_depth_m: float  # camera-frame z of the target's centre
     target_center_px: FloatArray  # (2,) projection of the target's centre; NaN behind the camera
     ground_depth_m: float  # camera-frame z of the static surface under the box centre's ray
-    ground_point_m: FloatArray  # (3,) world point of that surface hit, NaN if none
 
 
 def box_corners(box: VehicleBox) -> FloatArray:
@@ -128,13 +127,13 @@ def visible_fraction(
     return clear / len(pts)
 
 
-def ground_hit(
+def ground_depth(
     client_id: int, K: CameraIntrinsics, T_world_cam: Pose, pixel: FloatArray, max_range_m: float
-) -> tuple[float, FloatArray]:
-    """Cast the pixel's ray against static geometry: (camera-frame z [m], world point), NaN if none."""
+) -> float:
+    """Cast the pixel's ray against static geometry: camera-frame z [m] of the hit, NaN if none."""
     u, v = float(pixel[0]), float(pixel[1])
     if not (math.isfinite(u) and math.isfinite(v)):
-        return float("nan"), np.full(3, np.nan)
+        return float("nan")
     # camera ray (x, y, 1) scaled to the ray length; world end = t + R ray
     x, y = (u - K.cx_px) / K.fx_px, (v - K.cy_px) / K.fy_px
     scale = min(max_range_m, MAX_RAY_LENGTH_M) / math.sqrt(x * x + y * y + 1.0)
@@ -142,11 +141,9 @@ def ground_hit(
     end = start + T_world_cam.R @ np.array([x * scale, y * scale, scale])
     hit = p.rayTest(start.tolist(), end.tolist(), physicsClientId=client_id)[0]
     if hit[0] < 0:
-        return float("nan"), np.full(3, np.nan)
-    point = np.asarray(hit[3], dtype=np.float64)
+        return float("nan")
     # camera-frame z of the hit = z_cam . (point - t), z_cam the third column of R
-    depth = float(T_world_cam.R[:, 2] @ (point - start))
-    return depth, point
+    return float(T_world_cam.R[:, 2] @ (np.asarray(hit[3], dtype=np.float64) - start))
 
 
 def compute_ground_truth(
@@ -174,7 +171,7 @@ def compute_ground_truth(
     target_depth = float(target_cam[0, 2])
     fraction = visible_fraction(client_id, K, T_world_cam, target, T_cam_world)
     centre = target_bbox[:2] + target_bbox[2:] / 2.0
-    ground_depth, ground_point = ground_hit(client_id, K, T_world_cam, centre, max_range_m)
+    ground = ground_depth(client_id, K, T_world_cam, centre, max_range_m)
     return GroundTruth(
         target_bbox=target_bbox,
         decoy_bboxes=decoy_bboxes,
@@ -183,6 +180,5 @@ def compute_ground_truth(
         target_velocity_mps=np.asarray(target_velocity_mps, dtype=np.float64),
         target_depth_m=target_depth,
         target_center_px=K.project(target_cam)[0],
-        ground_depth_m=ground_depth,
-        ground_point_m=ground_point,
+        ground_depth_m=ground,
     )
