@@ -64,22 +64,32 @@ def box_corners(box: VehicleBox) -> FloatArray:
     return box.points(_UNIT_CORNERS)
 
 
+def camera_projection(K: CameraIntrinsics, T_cam_world: Pose) -> tuple[FloatArray, FloatArray]:
+    """(M (3, 3), m (3,)) with K (R x + t) = M x + m: world points to homogeneous pixels (u w, v w, w),
+    w the camera-frame depth [m]."""
+    M = np.array([[K.fx_px, 0.0, K.cx_px], [0.0, K.fy_px, K.cy_px], [0.0, 0.0, 1.0]]) @ T_cam_world.R
+    return M, M @ (T_cam_world.R.T @ T_cam_world.t)
+
+
 def projected_boxes(K: CameraIntrinsics, T_cam_world: Pose, corners_world: FloatArray) -> FloatArray:
     """(B, 4) image boxes (x, y, w, h) of vehicles given their world corners (B, 8, 3) [m], clipped
     to the image; NaN rows for boxes out of view or with a corner behind the camera."""
     if len(corners_world) == 0:
         return np.zeros((0, 4))
-    cam = corners_world @ T_cam_world.R.T + T_cam_world.t  # (B, 8, 3)
-    z = cam[..., 2]
+    M, m = camera_projection(K, T_cam_world)
+    uvw = corners_world @ M.T + m  # (B, 8, 3)
+    depth = uvw[..., 2:]
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = K.fx_px * cam[..., 0] / z + K.cx_px
-        v = K.fy_px * cam[..., 1] / z + K.cy_px
-    x0 = np.maximum(u.min(axis=1), -0.5)
-    y0 = np.maximum(v.min(axis=1), -0.5)
-    x1 = np.minimum(u.max(axis=1), K.width_px - 0.5)
-    y1 = np.minimum(v.max(axis=1), K.height_px - 0.5)
-    out = np.stack([x0, y0, x1 - x0, y1 - y0], axis=1)
-    out[(z <= 0.0).any(axis=1) | (x1 <= x0) | (y1 <= y0)] = np.nan
+        uv = uvw[..., :2] / depth  # (B, 8, 2)
+    # ufunc reductions directly: ndarray.min/max go through Python wrappers that cost more than the
+    # arithmetic on these few corners
+    out = np.empty((len(uv), 4))
+    lo = np.maximum(np.minimum.reduce(uv, axis=1), -0.5, out=out[:, :2])
+    hi = np.minimum(np.maximum.reduce(uv, axis=1), (K.width_px - 0.5, K.height_px - 0.5))
+    np.subtract(hi, lo, out=out[:, 2:])
+    behind = np.minimum.reduce(depth[..., 0], axis=1) <= 0.0
+    empty = np.minimum.reduce(out[:, 2:], axis=1) <= 0.0
+    out[behind | empty] = np.nan
     return out
 
 
@@ -104,25 +114,29 @@ def segmentation_boxes(seg: npt.NDArray[np.int32], body_ids: npt.ArrayLike) -> F
 
 def visible_fraction(
     client_id: int, K: CameraIntrinsics, T_world_cam: Pose, box: VehicleBox,
-    T_cam_world: Pose | None = None,
+    T_cam_world: Pose | None = None, box_in_image: bool = False,
 ) -> float:
     """Fraction of sample points inside the target's box that are in the image and not hidden by
-    terrain or buildings (vehicles carry no collision shape, so rays pass through them)."""
+    terrain or buildings (vehicles carry no collision shape, so rays pass through them).
+
+    `box_in_image`: the caller knows the whole box projects inside the image in front of the camera
+    (then, the image being convex, so do all sample points, and their projection is skipped)."""
     pts = box.points(_UNIT_GRID)
-    T_cam_world = T_world_cam.inverse() if T_cam_world is None else T_cam_world
-    uv = K.project(T_cam_world.apply(pts))
-    in_image = (
-        np.isfinite(uv[:, 0])
-        & (uv[:, 0] >= -0.5) & (uv[:, 0] <= K.width_px - 0.5)
-        & (uv[:, 1] >= -0.5) & (uv[:, 1] <= K.height_px - 0.5)
-    )
-    if not in_image.any():
-        return 0.0
-    origin = T_world_cam.t
-    targets = pts[in_image]
-    hits = p.rayTestBatch(
-        [origin.tolist()] * len(targets), targets.tolist(), physicsClientId=client_id
-    )
+    if box_in_image:
+        targets = pts
+    else:
+        T_cam_world = T_world_cam.inverse() if T_cam_world is None else T_cam_world
+        M, m = camera_projection(K, T_cam_world)
+        uvw = pts @ M.T + m
+        depth = uvw[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u, v = uvw[:, 0] / depth, uvw[:, 1] / depth
+        in_image = ((depth > 0.0) & (u >= -0.5) & (u <= K.width_px - 0.5)
+                    & (v >= -0.5) & (v <= K.height_px - 0.5))
+        if not np.logical_or.reduce(in_image):
+            return 0.0
+        targets = pts[in_image]
+    hits = p.rayTestBatch([T_world_cam.t.tolist()] * len(targets), targets.tolist(), physicsClientId=client_id)
     clear = sum(1 for h in hits if h[0] < 0 or h[2] >= RAY_CLEAR_FRACTION)
     return clear / len(pts)
 
@@ -146,6 +160,20 @@ def ground_depth(
     return float(T_world_cam.R[:, 2] @ (np.asarray(hit[3], dtype=np.float64) - start))
 
 
+def _pixel(K: CameraIntrinsics, x: float, y: float, z: float) -> FloatArray:
+    """(2,) pixel of a camera-frame point [m]; NaN behind the camera."""
+    if z <= 0.0:
+        return np.full(2, np.nan)
+    return np.array((K.fx_px * x / z + K.cx_px, K.fy_px * y / z + K.cy_px))
+
+
+def _strictly_inside(K: CameraIntrinsics, bbox: FloatArray) -> bool:
+    """Whether a projected (unclipped-looking) box lies strictly inside the image: its clipped sides
+    then equal its true sides, so every point of the 3D box projects into the image."""
+    x, y, w, h = (float(v) for v in bbox)
+    return x > -0.5 and y > -0.5 and x + w < K.width_px - 0.5 and y + h < K.height_px - 0.5
+
+
 def compute_ground_truth(
     client_id: int,
     K: CameraIntrinsics,
@@ -167,9 +195,9 @@ def compute_ground_truth(
     else:
         boxes = projected_boxes(K, T_cam_world, vehicle_corners_m)
         target_bbox, decoy_bboxes = boxes[0], boxes[1:]
-    target_cam = T_cam_world.apply(target.center_m.reshape(1, 3))
-    target_depth = float(target_cam[0, 2])
-    fraction = visible_fraction(client_id, K, T_world_cam, target, T_cam_world)
+    x, y, z = (T_cam_world.R @ target.center_m + T_cam_world.t).tolist()  # target centre, camera frame
+    fraction = visible_fraction(client_id, K, T_world_cam, target, T_cam_world,
+                                box_in_image=seg is None and _strictly_inside(K, target_bbox))
     centre = target_bbox[:2] + target_bbox[2:] / 2.0
     ground = ground_depth(client_id, K, T_world_cam, centre, max_range_m)
     return GroundTruth(
@@ -178,7 +206,7 @@ def compute_ground_truth(
         target_visible_fraction=fraction,
         target_position_m=target.center_m.copy(),
         target_velocity_mps=np.asarray(target_velocity_mps, dtype=np.float64),
-        target_depth_m=target_depth,
-        target_center_px=K.project(target_cam)[0],
+        target_depth_m=z,
+        target_center_px=_pixel(K, x, y, z),
         ground_depth_m=ground,
     )

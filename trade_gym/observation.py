@@ -12,13 +12,21 @@ import numpy as np
 from gymnasium import spaces
 
 from trade.types import ImuBatch
-from trade_gym.perception.base import FloatArray, PerceptionOutput
+from trade_gym.perception.base import FloatArray, PerceptionOutput, finite_imu
 
 POSITION_BOUND_M = 1000.0
 VELOCITY_BOUND_MPS = 100.0
 IMU_ACCEL_BOUND_MPS2 = 160.0  # MPU-9250 full scale 16 g
 IMU_GYRO_BOUND_RADPS = 35.0  # MPU-9250 full scale 2000 deg/s
 TIME_BOUND_S = 3600.0
+
+
+# (key, start, end) of each observation entry in the flat buffer `build_observation` fills, in the
+# order of `OBSERVATION_SIZES`.
+OBSERVATION_SIZES = (("target_pos_rel_m", 3), ("target_vel_mps", 3), ("drone_vel_mps", 3), ("bbox_norm", 4),
+                     ("target_depth_m", 1), ("track_valid", 1), ("time_lost_s", 1), ("imu", 6))
+_ends = np.cumsum([n for _, n in OBSERVATION_SIZES]).tolist()
+_LAYOUT = tuple((key, end - n, end) for (key, n), end in zip(OBSERVATION_SIZES, _ends))
 
 
 def observation_space() -> spaces.Dict:
@@ -74,23 +82,40 @@ def build_observation(
     else:
         bbox_norm = [0.0, 0.0, 0.0, 0.0]
     depth = estimate.target_depth_m if math.isfinite(estimate.target_depth_m) else 0.0
-    if len(imu.t_s):
-        imu_mean = np.concatenate([imu.accel_mps2.mean(axis=0), imu.gyro_radps.mean(axis=0)])
-        imu_mean = np.where(np.isfinite(imu_mean), imu_mean, 0.0)
+    imu_mean = _imu_mean(imu)
+    if imu_mean is not None:
         imu_values = [_clip(float(v), IMU_ACCEL_BOUND_MPS2) for v in imu_mean[:3]]
         imu_values += [_clip(float(v), IMU_GYRO_BOUND_RADPS) for v in imu_mean[3:]]
     else:
         imu_values = [0.0] * 6
-    return {
-        "target_pos_rel_m": np.array(heading(rel, POSITION_BOUND_M), np.float32),
-        "target_vel_mps": np.array(heading(estimate.velocity_world_mps, VELOCITY_BOUND_MPS), np.float32),
-        "drone_vel_mps": np.array(heading(drone_velocity_world_mps, VELOCITY_BOUND_MPS), np.float32),
-        "bbox_norm": np.array(bbox_norm, np.float32),
-        "target_depth_m": np.array([min(max(depth, 0.0), POSITION_BOUND_M)], np.float32),
-        "track_valid": np.array([1.0 if estimate.valid else 0.0], np.float32),
-        "time_lost_s": np.array([min(time_lost_s, TIME_BOUND_S)], np.float32),
-        "imu": np.array(imu_values, np.float32),
-    }
+    values = [
+        *heading(rel, POSITION_BOUND_M),
+        *heading(estimate.velocity_world_mps, VELOCITY_BOUND_MPS),
+        *heading(drone_velocity_world_mps, VELOCITY_BOUND_MPS),
+        *bbox_norm,
+        min(max(depth, 0.0), POSITION_BOUND_M),
+        1.0 if estimate.valid else 0.0,
+        min(time_lost_s, TIME_BOUND_S),
+        *imu_values,
+    ]
+    # One float32 buffer per step (fresh each call), handed out as per-key views: one array
+    # construction instead of eight.
+    flat = np.array(values, np.float32)
+    return {key: flat[lo:hi] for key, lo, hi in _LAYOUT}
+
+
+def _imu_mean(imu: ImuBatch) -> FloatArray | None:
+    """(6,) mean specific force and rate over the frame's finite samples (a faulty IMU's NaN/inf samples
+    are dropped); None when the frame has no finite sample."""
+    if not len(imu.t_s):
+        return None
+    mean = np.concatenate([imu.accel_mps2.mean(axis=0), imu.gyro_radps.mean(axis=0)])
+    if np.all(np.isfinite(mean)):
+        return mean
+    imu = finite_imu(imu)  # rare: only when a sample is corrupt
+    if not len(imu.t_s):
+        return None
+    return np.concatenate([imu.accel_mps2.mean(axis=0), imu.gyro_radps.mean(axis=0)])
 
 
 def _clip(value: float, bound: float) -> float:

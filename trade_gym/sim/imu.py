@@ -5,6 +5,7 @@ Owns the noise model (white noise + bias random walk, MPU-9250 densities) and th
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -16,7 +17,13 @@ from trade.types import ImuBatch
 FloatArray = npt.NDArray[np.float64]
 
 _CLOCK_TOLERANCE_S = 1e-9  # a sample due at t counts as reached when truth time >= t - tolerance
-_N_NOISE_COLUMNS = 12  # accel white (3), gyro white (3), accel bias steps (3), gyro bias steps (3)
+_N_AXES = 6  # accel (3) then gyro (3)
+_WEIGHT_CACHE_SIZE = 256  # interpolation patterns kept (the env cycles through a few)
+# Times closer than this share cached interpolation weights. 1 ns: the float drift of the accumulated physics
+# time (~1e-12 s after minutes) no longer makes new keys, so the cache holds the few real patterns (4, not one
+# more every ~25 frames, ~50 B/step of heap growth until the 256-entry clear).
+_WEIGHT_KEY_RESOLUTION_S = 1e-9
+_N_NOISE_COLUMNS = 2 * _N_AXES  # accel white (3), gyro white (3), accel bias steps (3), gyro bias steps (3)
 
 
 @dataclass(frozen=True)
@@ -87,12 +94,13 @@ class Imu:
         """Restart the sample clock at `t0_s` [s], draw initial biases from `rng`, drop stored truth."""
         cfg = self.config
         self._rng = rng
-        self._white_sigma, self._bias_step_sigma = cfg.white_sigma, cfg.bias_step_sigma
+        self._sigmas = np.concatenate([cfg.white_sigma, cfg.bias_step_sigma])  # (12,) per draw column
         self._t0_s = float(t0_s)
         self._next_k = 1
         self._truth: list[tuple[float, float, float, float, float, float, float]] = []
+        self._weight_cache: dict[tuple, FloatArray] = {}
         sigma0 = np.repeat([cfg.accel_initial_bias_sigma_mps2, cfg.gyro_initial_bias_sigma_radps], 3)
-        self._bias = sigma0 * rng.standard_normal(6) if cfg.enabled else np.zeros(6)
+        self._bias = sigma0 * rng.standard_normal(_N_AXES) if cfg.enabled else np.zeros(_N_AXES)
 
     @property
     def accel_bias_mps2(self) -> FloatArray:
@@ -112,37 +120,73 @@ class Imu:
 
     def read(self) -> ImuBatch:
         """Samples due since the previous read: t_s (N,), accel (N, 3) [m/s^2], gyro (N, 3) [rad/s]."""
-        if not self._truth:
+        truth = self._truth
+        if not truth:
             return ImuBatch.empty()
         cfg = self.config
-        truth = np.array(self._truth)  # (M, 7): t, f (3), w (3)
-        self._truth = [self._truth[-1]]  # keep the latest as the anchor for the next interpolation
-        t_last = truth[-1, 0]
+        self._truth = [truth[-1]]  # keep the latest as the anchor for the next interpolation
         # last sample index due: k_end = floor((t_last - t0) rate + tolerance)
-        k_end = math.floor((t_last - self._t0_s + _CLOCK_TOLERANCE_S) * cfg.rate_hz)
+        k_end = math.floor((truth[-1][0] - self._t0_s + _CLOCK_TOLERANCE_S) * cfg.rate_hz)
         if k_end < self._next_k:
             return ImuBatch.empty()
-        t_s = self._t0_s + np.arange(self._next_k, k_end + 1) * cfg.period_s
+        times = [self._t0_s + k * cfg.period_s for k in range(self._next_k, k_end + 1)]
         self._next_k = k_end + 1
-        values = _interpolate(truth[:, 0], truth[:, 1:], t_s)  # (N, 6)
+        truth_values = np.array(truth)[:, 1:]  # (M, 6)
+        values = self._weights([row[0] for row in truth], times) @ truth_values
         if cfg.enabled:
-            values = values + self._noise(len(t_s))
-        return ImuBatch(t_s=t_s, accel_mps2=values[:, :3], gyro_radps=values[:, 3:])
+            values += self._noise(len(times))
+        return ImuBatch(t_s=np.array(times), accel_mps2=values[:, :3], gyro_radps=values[:, 3:])
+
+    def _weights(self, t_truth: list[float], t_query: list[float]) -> FloatArray:
+        """(N, M) interpolation weights for truth at t_truth (M,) and samples at t_query (N,) [s].
+
+        Cached by the times relative to the first sample, rounded to `_WEIGHT_KEY_RESOLUTION_S`: the
+        pattern of physics, IMU and frame times repeats every few frames, so nearly every read is a
+        cache hit (a hit reuses weights of times within that resolution, far below any effect)."""
+        t_ref = t_query[0]
+        key = (tuple(round((t - t_ref) / _WEIGHT_KEY_RESOLUTION_S) for t in t_truth),
+               tuple(round((t - t_ref) / _WEIGHT_KEY_RESOLUTION_S) for t in t_query))
+        W = self._weight_cache.get(key)
+        if W is None:
+            if len(self._weight_cache) >= _WEIGHT_CACHE_SIZE:
+                self._weight_cache.clear()
+            W = self._weight_cache[key] = _interpolation_weights(np.array(t_truth), np.array(t_query))
+        return W
 
     def _noise(self, n: int) -> FloatArray:
-        """(n, 6) noise: bias_k = bias_{k-1} + sigma_b * N(0, 1); sample = bias_k + sigma_w * N(0, 1)."""
-        draws = self._rng.standard_normal((n, _N_NOISE_COLUMNS))
-        bias = self._bias + np.cumsum(draws[:, 6:] * self._bias_step_sigma, axis=0)
-        self._bias = bias[-1].copy()
-        return bias + draws[:, :6] * self._white_sigma
+        """(n, 6) noise: bias_k = bias_{k-1} + sigma_b * N(0, 1); sample = bias_k + sigma_w * N(0, 1).
+
+        With the draws scaled, the bias walk is a cumulative sum, written as L @ steps with L the
+        (n, n) lower-triangular ones (cheaper than np.cumsum for a handful of samples)."""
+        draws = self._rng.standard_normal((n, _N_NOISE_COLUMNS)) * self._sigmas  # white (6), bias steps (6)
+        walk = _lower_ones(n) @ draws[:, _N_AXES:]  # (n, 6) bias change since the last read
+        noise = draws[:, :_N_AXES] + walk + self._bias
+        self._bias = self._bias + walk[-1]
+        return noise
 
 
-def _interpolate(t_truth: FloatArray, values: FloatArray, t_query: FloatArray) -> FloatArray:
-    """Linear interpolation of values (M, D) at t_truth (M,) to t_query (N,); held flat outside."""
-    if len(t_truth) == 1:
-        return np.repeat(values, len(t_query), axis=0)
-    # fractional truth index s(t) by np.interp, then x = x_i + (s - i) (x_{i+1} - x_i), i = floor(s)
-    s = np.interp(t_query, t_truth, np.arange(len(t_truth), dtype=np.float64))
-    i = np.minimum(s.astype(np.intp), len(t_truth) - 2)
-    w = (s - i)[:, None]
-    return values[i] + w * (values[i + 1] - values[i])
+
+def _interpolation_weights(t_truth: FloatArray, t_query: FloatArray) -> FloatArray:
+    """(N, M) weights W so that W @ values (M, D) linearly interpolates values given at sorted times
+    t_truth (M,) to t_query (N,), held flat outside."""
+    M = len(t_truth)
+    W = np.zeros((len(t_query), M))
+    if M == 1:
+        W[:, 0] = 1.0
+        return W
+    # fractional index s(t) by np.interp; x = (1 - w) x_i + w x_{i+1}, i = floor(s), w = s - i
+    s = np.interp(t_query, t_truth, np.arange(M, dtype=np.float64))
+    i = np.minimum(s.astype(np.intp), M - 2)
+    w = s - i
+    rows = np.arange(len(t_query))
+    W[rows, i] = 1.0 - w
+    W[rows, i + 1] += w
+    return W
+
+
+@functools.lru_cache(maxsize=_WEIGHT_CACHE_SIZE)
+def _lower_ones(n: int) -> FloatArray:
+    """(n, n) lower-triangular ones: L @ x is the cumulative sum of x's rows."""
+    L = np.tril(np.ones((n, n)))
+    L.setflags(write=False)
+    return L

@@ -6,7 +6,7 @@ Owns the rigid body (a box with mass and inertia), the setpoint limits and the g
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -211,6 +211,20 @@ class Quadrotor:
         p.applyExternalTorque(b, _BODY_LINK, torque, p.LINK_FRAME, physicsClientId=c)
         self._v_pre, self._m_pre, self._dt_s = vel, m, float(dt_s)
         self._t_s += float(dt_s)
+
+    def fly(self, n_steps: int, dt_s: float, t_s: float,
+            imu_truth: Callable[[float, tuple[float, ...], tuple[float, ...]], None]) -> float:
+        """Run `n_steps` physics steps of `dt_s` [s] from time `t_s` [s]: controller, pybullet step, then
+        `imu_truth(t, specific force (3,) body [m/s^2], rate (3,) body [rad/s])` after each; returns the
+        new time. Equivalent to the documented per-step sequence, in one call for the env's hot loop."""
+        c = self.client_id
+        for _ in range(n_steps):
+            self.physics_step(dt_s)
+            p.stepSimulation(physicsClientId=c)
+            t_s += dt_s
+            sample = self._sample()
+            imu_truth(t_s, sample[5], sample[4])
+        return t_s
 
     def _desired_specific_thrust(self, yaw: float, vel: tuple[float, ...]) -> tuple[float, float, float]:
         """Thrust per mass (3,) world [m/s^2]: f = clip(a_d) - g with tilt and thrust limits."""

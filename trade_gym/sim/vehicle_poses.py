@@ -72,9 +72,11 @@ def _arrays(pose: Pose12) -> tuple[FloatArray, FloatArray]:
 class VehiclePoses:
     """Poses of a world's vehicles as pure functions of time, each computed once per time.
 
-    Parked vehicles are posed and placed in pybullet once; `update(t)` computes the moving ones at t and
-    places their bodies; `pose(v, t)` returns the cached arrays when t is that time (or v is parked) and
-    computes the same function otherwise, so the result never depends on whether `update(t)` ran.
+    Parked vehicles are posed and placed in pybullet once; `update(t)` computes the moving ones at t;
+    `place_bodies()` moves their pybullet bodies there. Vehicles carry no collision shape, so only
+    rendering needs the bodies placed, and a step that does not render skips it. `pose(v, t)` returns
+    the cached arrays when t is that time (or v is parked) and computes the same function otherwise, so
+    the result never depends on whether `update(t)` ran.
     """
 
     def __init__(self, client_id: int, terrain: Heightfield, vehicles: tuple[Vehicle, ...]) -> None:
@@ -83,23 +85,31 @@ class VehiclePoses:
         self._moving = tuple(v for v in vehicles if v.motion.is_moving)
         self._cache: dict[int, tuple[float | None, FloatArray, FloatArray]] = {}
         self._t_s: float | None = None
+        self._unplaced: dict[int, Pose12] = {}  # body id -> pose its pybullet body has not been moved to
         for v in vehicles:
             if not v.motion.is_moving:
-                self._place(v, None, pose_at(terrain, v, 0.0))
+                self._cache_pose(v, None, pose_at(terrain, v, 0.0))
+        self.place_bodies()
 
-    def _place(self, v: Vehicle, t_s: float | None, pose: Pose12) -> None:
-        """Cache the pose (t None: valid at any time) and move the body there."""
+    def _cache_pose(self, v: Vehicle, t_s: float | None, pose: Pose12) -> None:
+        """Cache the pose (t None: valid at any time); its body is moved at the next `place_bodies`."""
         self._cache[v.body_id] = (t_s, *_arrays(pose))
-        p.resetBasePositionAndOrientation(v.body_id, pose[:3], quat_xyzw_at(pose), physicsClientId=self.client_id)
+        self._unplaced[v.body_id] = pose
 
     def update(self, t_s: float) -> None:
-        """Pose and place the moving vehicles at time t_s [s] (no work if already there)."""
+        """Pose the moving vehicles at time t_s [s] (no work if already there)."""
         t = float(t_s)
         if t == self._t_s:
             return
         for v in self._moving:
-            self._place(v, t, pose_at(self.terrain, v, t))
+            self._cache_pose(v, t, pose_at(self.terrain, v, t))
         self._t_s = t
+
+    def place_bodies(self) -> None:
+        """Move the pybullet bodies to the latest poses (before rendering)."""
+        for body_id, pose in self._unplaced.items():
+            p.resetBasePositionAndOrientation(body_id, pose[:3], quat_xyzw_at(pose), physicsClientId=self.client_id)
+        self._unplaced.clear()
 
     def pose(self, v: Vehicle, t_s: float) -> tuple[FloatArray, FloatArray]:
         """(3,) box centre [m] and (3, 3) R_world_vehicle at time t_s, read-only arrays."""

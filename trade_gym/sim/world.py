@@ -136,6 +136,7 @@ class World:
         self.roofs = RoofIndex(layout.buildings_lo_m, layout.buildings_hi_m)
         self._poses = VehiclePoses(client_id, self.terrain, (target, *decoys))  # places the parked ones
         self.update(0.0)
+        self.place_vehicle_bodies()
 
     @property
     def duration_s(self) -> float:
@@ -151,8 +152,13 @@ class World:
         return self.layout.buildings_hi_m
 
     def update(self, t_s: float) -> None:
-        """Pose the target and the moving decoys at time t_s (parked ones never move); once per t_s."""
+        """Pose the target and the moving decoys at time t_s (parked ones never move); once per t_s.
+        Their pybullet bodies move at the next `place_vehicle_bodies` (only rendering sees them)."""
         self._poses.update(t_s)
+
+    def place_vehicle_bodies(self) -> None:
+        """Move the vehicles' pybullet bodies to their poses at the last `update` (call before rendering)."""
+        self._poses.place_bodies()
 
     def vehicle_pose(self, v: Vehicle, t_s: float) -> tuple[FloatArray, FloatArray]:
         """(3,) box centre [m] and (3, 3) R_world_vehicle at time t_s, read-only arrays.

@@ -1,0 +1,94 @@
+"""Before/after oracle step rate in one run: alternate subprocesses on a baseline source tree and on
+this tree, so both see the same machine load, and report the ratio of their CPU-time rates.
+
+Usage: git worktree add /tmp/base <commit>; python benchmarks/ab_speed.py --base /tmp/base
+       [--scene desert] [--steps 1500] [--rounds 3] [--json OUT]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parents[1]
+
+# One measurement: oracle mode, scripted follower, the CPU time spent inside env.step only.
+_PROBE = """
+import json, sys, time, numpy as np
+from agents import ScriptedFollower
+from trade_gym.env import TradeFollowEnv
+scene, steps = sys.argv[1], int(sys.argv[2])
+env = TradeFollowEnv(scene=scene, perception="oracle")
+policy = ScriptedFollower()
+obs, _ = env.reset(seed=0)
+cpu = wall = 0.0
+episode = 0
+for _ in range(steps):
+    action, _ = policy.predict(obs)
+    c, w = time.process_time(), time.perf_counter()
+    obs, _, terminated, truncated, _ = env.step(action)
+    cpu += time.process_time() - c
+    wall += time.perf_counter() - w
+    if terminated or truncated:
+        episode += 1
+        obs, _ = env.reset(seed=episode)
+env.close()
+print(json.dumps({"cpu_steps_per_s": steps / cpu, "wall_steps_per_s": steps / wall}))
+"""
+
+
+def _measure(tree: Path, scene: str, steps: int) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    out = subprocess.run([sys.executable, "-c", _PROBE, scene, str(steps)], cwd=tree, env=env,
+                         capture_output=True, text=True, check=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def _commit(tree: Path) -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=tree, capture_output=True,
+                              text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--base", type=Path, required=True, help="source tree of the baseline")
+    parser.add_argument("--scene", default="desert")
+    parser.add_argument("--steps", type=int, default=1500)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--json", type=Path, default=None)
+    args = parser.parse_args()
+    if not (args.base / "trade_gym").is_dir():
+        parser.error(f"--base {args.base} holds no trade_gym package")
+    base, new = [], []
+    for _ in range(args.rounds):
+        base.append(_measure(args.base, args.scene, args.steps))
+        new.append(_measure(HERE, args.scene, args.steps))
+    ratios = [n["cpu_steps_per_s"] / b["cpu_steps_per_s"] for b, n in zip(base, new)]
+    result = {
+        "scene": args.scene,
+        "steps_per_round": args.steps,
+        "base_commit": _commit(args.base),
+        "base_cpu_steps_per_s": [round(b["cpu_steps_per_s"], 1) for b in base],
+        "new_cpu_steps_per_s": [round(n["cpu_steps_per_s"], 1) for n in new],
+        "base_wall_steps_per_s": [round(b["wall_steps_per_s"], 1) for b in base],
+        "new_wall_steps_per_s": [round(n["wall_steps_per_s"], 1) for n in new],
+        "speedup_cpu_median": round(statistics.median(ratios), 3),
+        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "load_average_1min_at_end": round(os.getloadavg()[0], 2),
+    }
+    print(json.dumps(result, indent=2))
+    if args.json:
+        args.json.write_text(json.dumps(result, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()
