@@ -1,7 +1,9 @@
 """Affine fit of single-image relative inverse depth to ROI feature inverse depths, and metric depth from it.
 
-Owns the paper's {theta0, theta1} = argmin sum (theta0 + rho'_i theta1 - rho_i)^2 in a 2-point RANSAC with a
-minimum sample separation (the fit is degenerate on planes parallel to the image), and the model-map check.
+Owns the paper's {theta0, theta1} = argmin sum (theta0 + rho'_i theta1 - rho_i)^2, in a 2-point RANSAC with a
+minimum sample separation (the fit is degenerate on planes parallel to the image) or as one plain least-squares
+fit over all features (the paper's Table 2 "without RANSAC"), the scale-only fallback when the features all
+lie at one model value, and the model-map check.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
 MIN_SAMPLE_POINTS = 2  # a line theta0 + theta1 rho' needs two correspondences
+MAP_RANGE_PERCENTILES = (5.0, 95.0)  # robust range of the model map [rho' units]
+FEATURE_SPREAD_PERCENTILES = (10.0, 90.0)  # robust spread of the features' rho' (one odd feature is not a spread)
 PAIR_OVERSAMPLING = 4  # candidate pairs drawn per wanted hypothesis (invalid ones are discarded)
 
 
@@ -41,6 +45,13 @@ class AffineFitConfig:
     min_correspondences: int = 6
     min_inlier_fraction: float = 0.3  # of the usable correspondences
     min_model_range_fraction: float = 1e-6  # model map with ptp <= this x max |value| counts as constant
+    # Features whose rho' spread (FEATURE_SPREAD_PERCENTILES) is below this fraction of the map's robust range
+    # (MAP_RANGE_PERCENTILES) lie on one depth level (ground parallel to the image, the usual nadir view):
+    # theta1 is unobservable there and a 2-parameter fit turns model noise into metric noise (city frames:
+    # theta1 of 1.5-8 turned the model's ~0.005 ripple into ~50 % depth noise), so only a scale is fitted,
+    # rho = theta1 rho'.
+    # 0 disables the check. RANSAC mode only.
+    min_feature_range_fraction: float = 0.1
 
     def __post_init__(self) -> None:
         for name in ("inlier_threshold_inv_m", "min_model_range_fraction"):
@@ -50,7 +61,7 @@ class AffineFitConfig:
         if not (np.isfinite(self.min_sample_distance_px) and self.min_sample_distance_px >= 0.0):
             raise ValueError("AffineFitConfig.min_sample_distance_px must be finite and >= 0, "
                              f"got {self.min_sample_distance_px!r}")
-        for name in ("min_model_separation_fraction", "min_inlier_fraction"):
+        for name in ("min_model_separation_fraction", "min_inlier_fraction", "min_feature_range_fraction"):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 raise ValueError(f"AffineFitConfig.{name} must be in [0, 1], got {value!r}")
@@ -63,12 +74,16 @@ class AffineFitConfig:
 
 @dataclass(frozen=True)
 class AffineFit:
-    """rho = theta0 + theta1 rho' [1/m]; inliers (M,) over the input correspondences (False where unusable)."""
+    """rho = theta0 + theta1 rho' [1/m]; inliers (M,) over the input correspondences (False where unusable);
+    rms_inv_m: RMS residual of the final fit over its inliers [1/m] (NaN when failed); scale_only: theta0 was
+    fixed at 0 because the features span too little of the model's range."""
 
     theta0: float
     theta1: float
     inliers: BoolArray
     status: FitStatus
+    rms_inv_m: float = float("nan")
+    scale_only: bool = False
 
     @property
     def ok(self) -> bool:
@@ -162,7 +177,70 @@ def fit_affine_inverse_depth(model_inv: npt.ArrayLike, feature_inv_m: npt.ArrayL
         return AffineFit.failed(FitStatus.NO_CONSENSUS, x_all.size)
     inliers = np.zeros(x_all.size, dtype=bool)
     inliers[np.flatnonzero(usable)[final]] = True
-    return AffineFit(t0, t1, inliers, FitStatus.OK)
+    return AffineFit(t0, t1, inliers, FitStatus.OK, _rms(t0, t1, x[final], y[final]))
+
+
+def fit_affine_least_squares(model_inv: npt.ArrayLike, feature_inv_m: npt.ArrayLike,
+                             config: AffineFitConfig | None = None) -> AffineFit:
+    """model_inv (M,) rho', feature_inv_m (M,) rho [1/m] -> one least-squares fit over every usable pair.
+
+    The paper's alignment without RANSAC: no outlier rejection, every finite pair with rho > 0 is an inlier.
+    TOO_FEW_POINTS below min_correspondences, DEGENERATE when rho' is constant, NO_CONSENSUS when theta1 <= 0.
+    """
+    cfg = config if config is not None else AffineFitConfig()
+    x_all = np.asarray(model_inv, dtype=np.float64).reshape(-1)
+    y_all = np.asarray(feature_inv_m, dtype=np.float64).reshape(-1)
+    if x_all.shape != y_all.shape:
+        raise ValueError(f"model_inv and feature_inv_m must have the same length, got {x_all.size}, {y_all.size}")
+    usable = np.isfinite(x_all) & np.isfinite(y_all) & (y_all > 0.0)
+    x, y = x_all[usable], y_all[usable]
+    if x.size < cfg.min_correspondences:
+        return AffineFit.failed(FitStatus.TOO_FEW_POINTS, x_all.size)
+    t0, t1 = _least_squares(x, y)
+    if not np.isfinite(t1):
+        return AffineFit.failed(FitStatus.DEGENERATE, x_all.size)
+    if t1 <= 0.0:
+        return AffineFit.failed(FitStatus.NO_CONSENSUS, x_all.size)
+    return AffineFit(t0, t1, usable.copy(), FitStatus.OK, _rms(t0, t1, x, y))
+
+
+def fit_scale_only(model_inv: npt.ArrayLike, feature_inv_m: npt.ArrayLike,
+                   config: AffineFitConfig | None = None) -> AffineFit:
+    """model_inv (M,) rho', feature_inv_m (M,) rho [1/m] -> rho = theta1 rho' (theta0 = 0), robust.
+
+    theta1 = median(rho / rho') over pairs with rho, rho' > 0; inliers |theta1 rho' - rho| < threshold; then
+    theta1 = sum(rho' rho) / sum(rho'^2) over the inliers (least squares through the origin).
+    """
+    cfg = config if config is not None else AffineFitConfig()
+    x_all = np.asarray(model_inv, dtype=np.float64).reshape(-1)
+    y_all = np.asarray(feature_inv_m, dtype=np.float64).reshape(-1)
+    usable = np.isfinite(x_all) & np.isfinite(y_all) & (y_all > 0.0) & (x_all > 0.0)
+    x, y, count = x_all[usable], y_all[usable], int(usable.sum())
+    if count < cfg.min_correspondences:
+        return AffineFit.failed(FitStatus.TOO_FEW_POINTS, x_all.size)
+    theta1 = float(np.median(y / x))
+    final = np.abs(theta1 * x - y) < cfg.inlier_threshold_inv_m
+    if final.sum() < max(MIN_SAMPLE_POINTS, int(np.ceil(cfg.min_inlier_fraction * count))):
+        return AffineFit.failed(FitStatus.NO_CONSENSUS, x_all.size)
+    theta1 = float(x[final] @ y[final]) / float(x[final] @ x[final])
+    inliers = np.zeros(x_all.size, dtype=bool)
+    inliers[np.flatnonzero(usable)[final]] = True
+    return AffineFit(0.0, theta1, inliers, FitStatus.OK, _rms(0.0, theta1, x[final], y[final]), scale_only=True)
+
+
+def _features_span_map(model_inv: FloatArray, model_at: FloatArray, config: AffineFitConfig) -> bool:
+    """Whether the features' robust rho' spread is >= min_feature_range_fraction of the map's robust range."""
+    finite = model_at[np.isfinite(model_at)]
+    if finite.size == 0:
+        return True  # nothing to decide on: the fit reports TOO_FEW_POINTS
+    f_lo, f_hi = np.percentile(finite, FEATURE_SPREAD_PERCENTILES)
+    lo, hi = np.percentile(model_inv, MAP_RANGE_PERCENTILES)
+    return bool(f_hi - f_lo >= config.min_feature_range_fraction * (hi - lo))
+
+
+def _rms(theta0: float, theta1: float, x: FloatArray, y: FloatArray) -> float:
+    """sqrt(mean (theta0 + theta1 x - y)^2) [1/m]."""
+    return float(np.sqrt(np.mean((theta0 + theta1 * x - y) ** 2)))
 
 
 def metric_depth(model_inv: npt.ArrayLike, fit: AffineFit) -> npt.NDArray[np.float32]:
@@ -186,9 +264,12 @@ def sample_map(model_inv: npt.ArrayLike, pixels_px: npt.ArrayLike) -> FloatArray
 
 
 def align_model_depth(model_inv: npt.ArrayLike, pixels_px: npt.ArrayLike, feature_depth_m: npt.ArrayLike,
-                      rng: np.random.Generator, config: AffineFitConfig | None = None) -> AlignedDepth:
+                      rng: np.random.Generator, config: AffineFitConfig | None = None,
+                      ransac: bool = True) -> AlignedDepth:
     """Model map (H, W), ROI features at pixels (M, 2) with camera z feature_depth_m (M,) [m] -> metric depth.
 
+    ransac: the 2-point RANSAC fit (default), or the scale-only fit when the features span too little of the
+    map's range (`min_feature_range_fraction`); False: plain least squares over all features.
     Invalid model maps and failed fits are signalled in `.fit.status` (depth all NaN), never raised.
     """
     cfg = config if config is not None else AffineFitConfig()
@@ -202,5 +283,11 @@ def align_model_depth(model_inv: npt.ArrayLike, pixels_px: npt.ArrayLike, featur
     d = np.asarray(feature_depth_m, dtype=np.float64).reshape(-1)
     with np.errstate(divide="ignore", invalid="ignore"):
         rho = np.where(d > 0.0, 1.0 / d, np.nan)  # rho = 1 / z; unusable where z <= 0 or NaN
-    fit = fit_affine_inverse_depth(sample_map(m, pix), rho, rng, cfg, pix)
+    model_at = sample_map(m, pix)
+    if not ransac:
+        fit = fit_affine_least_squares(model_at, rho, cfg)
+    elif _features_span_map(m, model_at, cfg):
+        fit = fit_affine_inverse_depth(model_at, rho, rng, cfg, pix)
+    else:
+        fit = fit_scale_only(model_at, rho, cfg)
     return AlignedDepth(metric_depth(m, fit), fit)

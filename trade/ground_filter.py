@@ -2,7 +2,8 @@
 
 Every `every_n_frames` frames the depth model runs, its map is aligned to the ROI features' metric
 depths (affine RANSAC in inverse depth), the ground is segmented around the box, and each live track
-is labelled ground or not; labels persist with the track until the next model run.
+is labelled ground or not (in the mask, and a converged track's depth must agree with the scaled map);
+labels persist with the track until the next model run.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from trade.depth_alignment import AffineFitConfig, align_model_depth
+from trade.depth_alignment import AffineFitConfig, AlignedDepth, FitStatus, align_model_depth, sample_map
 from trade.geometry import CameraIntrinsics, Pose
 from trade.ground_segmentation import GroundMask, GroundSegmentationConfig, points_in_mask, segment_ground
 from trade.roi_features import RoiFeatures
@@ -36,6 +37,7 @@ class GroundFilterConfig:
     every_n_frames: int = 3  # run the model on every n-th frame (10 Hz at a 30 Hz camera)
     min_promoted_features: int = 8  # converged ROI depths needed to align the model's map
     object_height_smoothing: float = 0.3  # weight of a new height estimate in the running mean
+    depth_agreement_sigmas: float = 3.0  # a converged track is ground only if its depth agrees with the map
     alignment: AffineFitConfig = field(default_factory=AffineFitConfig)
     segmentation: GroundSegmentationConfig = field(default_factory=GroundSegmentationConfig)
 
@@ -45,6 +47,9 @@ class GroundFilterConfig:
         if int(self.min_promoted_features) != self.min_promoted_features or self.min_promoted_features < 2:
             raise ValueError("GroundFilterConfig.min_promoted_features must be an integer >= 2, "
                              f"got {self.min_promoted_features!r}")
+        if not (np.isfinite(self.depth_agreement_sigmas) and self.depth_agreement_sigmas > 0.0):
+            raise ValueError("GroundFilterConfig.depth_agreement_sigmas must be finite and > 0, "
+                             f"got {self.depth_agreement_sigmas!r}")
         if not 0.0 < self.object_height_smoothing <= 1.0:
             raise ValueError("GroundFilterConfig.object_height_smoothing must be in (0, 1], "
                              f"got {self.object_height_smoothing!r}")
@@ -61,6 +66,9 @@ class GroundLabels:
     ran_model: bool
     model_ms: float
     segmentation_ms: float
+    # The model's latest map was rejected (non-finite, negative or constant): every track counts as ground
+    # (the plane fit then runs on all tracks, as without the mask) until a valid map gives a mask.
+    model_rejected: bool = False
 
 
 class GroundFilter:
@@ -79,6 +87,7 @@ class GroundFilter:
         self._labels: dict[int, bool] = {}
         self._object_height_m: float | None = None
         self._mask: GroundMask | None = None
+        self._model_rejected = False
 
     def update(self, rgb: npt.NDArray[np.uint8], roi: RoiFeatures, box: BBox, T_world_cam: Pose) -> GroundLabels:
         """Run the model when due (and enough ROI depths have converged), then label the tracks."""
@@ -94,20 +103,25 @@ class GroundFilter:
             self._segment(model_inv, roi, box, T_world_cam)
             seg_ms = (time.perf_counter() - start) * 1e3
             ran = True
-        return GroundLabels(self._ground_of(roi), self._object_height_m, self._mask, ran, model_ms, seg_ms)
+        return GroundLabels(self._ground_of(roi), self._object_height_m, self._mask, ran, model_ms, seg_ms,
+                            self._model_rejected)
 
     def _segment(self, model_inv: npt.NDArray[np.float32], roi: RoiFeatures, box: BBox, T_world_cam: Pose) -> None:
         promoted = roi.promoted
         aligned = align_model_depth(model_inv, roi.pixels[promoted], roi.depth_m[promoted], self._rng,
                                     self.config.alignment)
+        if aligned.fit.status is FitStatus.INVALID_MODEL_OUTPUT:
+            self._model_rejected = True  # fall back to all tracks until a valid map
+            return
         if not aligned.ok:
-            return  # invalid model output or no consistent fit: keep the previous labels
+            return  # no consistent fit: keep the previous labels
         mask = segment_ground(aligned.depth_m, self.intrinsics, T_world_cam, box, roi.roi, self.config.segmentation)
         if mask.plane is None:
             return
         self._mask = mask
-        inside = points_in_mask(roi.pixels, mask.mask)
-        self._labels = {int(t): bool(g) for t, g in zip(roi.track_ids, inside)}
+        self._model_rejected = False
+        ground = points_in_mask(roi.pixels, mask.mask) & self._depth_agrees(roi, aligned)
+        self._labels = {int(t): bool(g) for t, g in zip(roi.track_ids, ground)}
         seg = self.config.segmentation
         height = float(mask.object_height_m)
         if np.isfinite(height):
@@ -116,8 +130,35 @@ class GroundFilter:
             a = self.config.object_height_smoothing
             self._object_height_m = height if self._object_height_m is None else (1 - a) * self._object_height_m + a * height
 
+    def _depth_agrees(self, roi: RoiFeatures, aligned: AlignedDepth) -> BoolArray:
+        """(N,) True unless a converged track's depth contradicts the scaled map at its pixel:
+        |z_track - z_map| >= k sqrt(sigma_track^2 + sigma_map^2), sigma_map = z_map^2 rms (first order of
+        z = 1 / rho, rms: the alignment's inverse-depth residual). City runs had converged tracks at 1-4 m
+        on a street 32 m below (most likely born on the oncoming car, then slid onto the street): the mask
+        alone calls them ground and the plane fit chose them."""
+        agrees = ~roi.promoted
+        promoted = np.flatnonzero(roi.promoted)
+        z_map = sample_map(aligned.depth_m, roi.pixels[promoted])
+        sigma_map = z_map * z_map * aligned.fit.rms_inv_m
+        gap = np.abs(roi.depth_m[promoted] - z_map)
+        agrees[promoted] = gap < self.config.depth_agreement_sigmas * np.hypot(roi.sigma_m[promoted], sigma_map)
+        return agrees
+
+    @property
+    def model_rejected(self) -> bool:
+        """The model's latest map was rejected: every track counts as ground until a valid map."""
+        return self._model_rejected
+
+    def labels(self, roi: RoiFeatures) -> BoolArray | None:
+        """(N,) the persisted labels of `roi`'s live tracks without running the model (frames without a
+        box); None before the first mask."""
+        return self._ground_of(roi)
+
     def _ground_of(self, roi: RoiFeatures) -> BoolArray | None:
-        """Labels of the live tracks; tracks born since the last mask are not ground yet."""
+        """Labels of the live tracks; tracks born since the last mask are not ground yet; all ground while
+        the model's output is rejected."""
+        if self._model_rejected:
+            return np.ones(len(roi.track_ids), dtype=bool)
         if self._mask is None:
             return None
         return np.array([self._labels.get(int(t), False) for t in roi.track_ids], dtype=bool)

@@ -1,5 +1,5 @@
-"""Spec tests for trade.ground_segmentation on depth maps ray-cast analytically from a pinhole camera:
-a ground plane (flat or sloped), an axis-aligned target box and axis-aligned buildings."""
+"""Spec tests for trade.ground_segmentation (and the ground filter's track labels) on depth maps ray-cast
+analytically from a pinhole camera: a ground plane (flat or sloped), an axis-aligned target box and buildings."""
 
 from __future__ import annotations
 
@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 from trade.geometry import CameraIntrinsics, Pose
+from trade.ground_filter import GroundFilter, GroundFilterConfig
 from trade.ground_segmentation import GroundMask, GroundSegmentationConfig, points_in_mask, segment_ground
 from trade.planes import Plane
+from trade.roi_features import RoiFeatures
 from trade.types import BBox
 
 K = CameraIntrinsics.from_fov(256, 256, 110.0)
@@ -272,3 +274,44 @@ def test_points_in_mask_rounds_to_nearest_pixel_and_rejects_outside() -> None:
 def test_ground_segmentation_config_bad_field_is_named(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=f"GroundSegmentationConfig.{field} "):
         GroundSegmentationConfig(**{field: value})
+
+
+# ------------------------------------------------------------------ ground filter labels (trade.ground_filter)
+class _AffineInverseDepth:
+    """Stub depth model: 0.3 + 25 / z of the scene's exact depth (an affine map of inverse depth)."""
+
+    def __init__(self, depth_m: np.ndarray) -> None:
+        self.depth_m = depth_m
+
+    def predict(self, rgb: np.ndarray) -> np.ndarray:
+        return (0.3 + 25.0 / self.depth_m).astype(np.float32)
+
+
+def test_ground_filter_converged_track_with_contradicting_depth_is_not_ground() -> None:
+    # City seed 0: tracks on a moving car triangulate to 1-4 m, slide onto the street and sat in the mask;
+    # the plane fit then chose them. A converged track is ground only if its depth agrees with the scaled map.
+    scene = render(pitch_deg=20.0, buildings=(TOWER,))
+    rng = np.random.default_rng(11)
+    v, u = np.nonzero(ground_truth(scene))
+    pick = rng.choice(len(v), 40, replace=False)
+    pixels = np.c_[u[pick], v[pick]].astype(np.float64)
+    depth = scene.depth[v[pick], u[pick]].astype(np.float64) * (1.0 + 0.01 * rng.standard_normal(40))
+    depth[:4] = rng.uniform(1.0, 4.0, 4)  # wrong depths on street pixels
+    promoted = np.ones(40, dtype=bool)
+    promoted[-5:] = False  # not converged: labelled by the mask alone
+    n = len(pixels)
+    roi = RoiFeatures(pixels, pixels.copy(), np.full((n, 3), np.nan), depth, np.full(n, 0.3), promoted,
+                      np.arange(n), np.zeros(n, dtype=np.int64), scene.roi)
+    ground_filter = GroundFilter(GroundFilterConfig(), K, _AffineInverseDepth(scene.depth), np.random.default_rng(0))
+    labels = ground_filter.update(np.zeros((K.height_px, K.width_px, 3), np.uint8), roi, scene.box, scene.pose)
+    assert labels.ran_model and labels.mask is not None
+    assert mask_iou(labels.mask.mask, ground_truth(scene)) >= 0.9
+    assert not labels.ground[:4].any()  # in the mask, but their depth contradicts the map
+    assert labels.ground[4:].mean() >= 0.9  # agreeing and unconverged street tracks stay ground
+    np.testing.assert_array_equal(ground_filter.labels(roi), labels.ground)  # persisted for box-less frames
+
+
+@pytest.mark.parametrize(("field", "value"), [("depth_agreement_sigmas", 0.0), ("depth_agreement_sigmas", math.inf)])
+def test_ground_filter_config_bad_field_is_named(field: str, value: float) -> None:
+    with pytest.raises(ValueError, match=f"GroundFilterConfig.{field} "):
+        GroundFilterConfig(**{field: value})

@@ -50,6 +50,9 @@ class ColourBoxConfig:
     max_centre_gap_px: float = 4.0  # no blob within this distance of the centre -> no refinement
     min_area_ratio: float = 0.4  # refined box area / previous box area must lie in [min, max]
     max_area_ratio: float = 2.5
+    # blob pixels / area of the tracker's (scale-tracked) box must not exceed this: one vehicle fills
+    # about 0.8-1 of its box in any orientation, two identical vehicles side by side about twice that
+    max_blob_fill_ratio: float = 1.4
     max_border_sides: int = 1  # blobs touching more window sides (not image borders) are rejected
     min_contrast: float = 0.6  # mean L on the blob - mean L outside its box must exceed this
     learning_rate: float = 0.05  # eta in p <- (1 - eta) p + eta p_new, on accepted refinements only
@@ -73,6 +76,7 @@ class ColourBoxConfig:
             "max_centre_gap_px": self.max_centre_gap_px >= 0,
             "min_area_ratio": 0.0 < self.min_area_ratio <= 1.0,
             "max_area_ratio": self.max_area_ratio >= 1.0,
+            "max_blob_fill_ratio": self.max_blob_fill_ratio > 0.0,
             "max_border_sides": checks["max_border_sides"] and self.max_border_sides <= 4,
             "min_contrast": 0.0 <= self.min_contrast < 1.0,
             "learning_rate": 0.0 <= self.learning_rate <= 1.0,
@@ -227,9 +231,12 @@ class ColourBoxRefiner:
         _check_image(image_rgb)
         return self._quantised_likelihood(image_rgb).astype(np.float32) / _LEVELS
 
-    def refine(self, image_rgb: ImageRGB, center_px: npt.ArrayLike, box: BBox) -> BoxRefinement | None:
+    def refine(self, image_rgb: ImageRGB, center_px: npt.ArrayLike, box: BBox,
+               size_reference: BBox | None = None) -> BoxRefinement | None:
         """Tight box of the likelihood blob at `center_px` (x, y) [px], searched in a square window of
-        side max(window_factor * max(w, h), min_window_px) of the previous `box`; None without a blob."""
+        side max(window_factor * max(w, h), min_window_px) of the previous `box`; None without a blob.
+        `size_reference`: the tracker's own box (slowly scale-tracked), against which the blob's pixel
+        count is tested (a blob spanning the target and a look-alike beside it is rejected)."""
         _check_image(image_rgb)
         cfg = self.config
         center = np.asarray(center_px, dtype=np.float64).reshape(2)
@@ -247,7 +254,8 @@ class ColourBoxRefiner:
         blob = self._blob_at(fg, center - [cols.start, rows.start])
         if blob is None:
             return None
-        return self._judge(like, blob, threshold / _LEVELS, box, (cols.start, rows.start), image_rgb.shape[:2])
+        return self._judge(like, blob, threshold / _LEVELS, box, (cols.start, rows.start), image_rgb.shape[:2],
+                           size_reference)
 
     def _blob_at(self, fg: npt.NDArray[np.uint8], center_win: FloatArray) -> npt.NDArray[np.bool_] | None:
         """Mask of the 8-connected blob under the centre, else of the foreground pixel nearest to it
@@ -269,7 +277,7 @@ class ColourBoxRefiner:
         return labels == near[ys[nearest], xs[nearest]]
 
     def _judge(self, like: npt.NDArray[np.uint8], blob: npt.NDArray[np.bool_], threshold: float, previous: BBox,
-               origin: tuple[int, int], image_hw: tuple[int, int]) -> BoxRefinement:
+               origin: tuple[int, int], image_hw: tuple[int, int], size_reference: BBox | None) -> BoxRefinement:
         """Tight box of the blob in the window at `origin` (x, y) and the plausibility tests on it."""
         cfg = self.config
         rows = np.flatnonzero(blob.any(axis=1))
@@ -291,9 +299,12 @@ class ColourBoxRefiner:
             + (r1 == h - 1 and origin[1] + h < image_hw[0])
         )
         area_ratio = box.w_px * box.h_px / (previous.w_px * previous.h_px)
+        fill = area_px / (size_reference.w_px * size_reference.h_px) if size_reference is not None else 0.0
         rejection = ""
         if not cfg.min_area_ratio <= area_ratio <= cfg.max_area_ratio:
             rejection = f"area ratio {area_ratio:.2f} outside [{cfg.min_area_ratio}, {cfg.max_area_ratio}]"
+        elif fill > cfg.max_blob_fill_ratio:
+            rejection = f"blob fills {fill:.2f} > {cfg.max_blob_fill_ratio} of the tracker's box"
         elif touches > cfg.max_border_sides:
             rejection = f"blob touches {touches} window sides"
         elif contrast <= cfg.min_contrast:

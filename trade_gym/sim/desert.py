@@ -23,10 +23,12 @@ DUNE_AMPLITUDE_M, DUNE_CELLS = 4.0, 3
 ROUGH_AMPLITUDE_M, ROUGH_CELLS = 0.35, 40
 TRACK_FLAT_M, TRACK_BLEND_M = 2.5, 6.0  # terrain smoothed within these distances of driven paths [m]
 TRACK_SMOOTH_SIGMA_M = 2.5
-CROSS_AT = (0.2, 0.33)  # fraction of the route where the crossing decoy crosses
+CROSS_AT = (0.12, 0.2)  # fraction of the route where the crossing decoy crosses (within the first 10 s)
 CROSS_ANGLE_DEG = (60.0, 120.0)
 CROSS_HALF_LENGTH_M = 35.0
-CROSS_GAP_S = (3.0, 4.5)  # crossing decoy passes this long before/after the target
+# The crossing decoy passes this long before/after the target: close enough that the two identical
+# cars are side by side in the image (the paper's decoy encounter), with a few metres between them.
+CROSS_GAP_S = (1.7, 2.4)
 PASS_AT = (0.66, 0.8)  # fraction of the route where the oncoming decoy passes the target
 PASS_OFFSET_M = (8.0, 11.0)
 PASS_HALF_LENGTH_M = 25.0
@@ -55,7 +57,7 @@ def _route(spec: SceneSpec, rng: np.random.Generator) -> CatmullRomSpline:
 
 
 def _crossing(route: CatmullRomSpline, speed: float, rng: np.random.Generator) -> VehicleMotion:
-    """A car whose path crosses the route a few seconds before or after the target passes."""
+    """A car whose path crosses the route shortly before or after the target passes."""
     s_c = rng.uniform(*CROSS_AT) * route.length_m
     centre, tangent = route.position_m(s_c), route.tangent(s_c)
     angle = np.radians(rng.uniform(*CROSS_ANGLE_DEG)) * rng.choice([-1.0, 1.0])

@@ -152,6 +152,24 @@ def test_refine_identical_car_6px_away_not_merged_target_blob_wins(angle_deg: fl
         assert iou(ref.box.as_array(), gt_other) <= iou(gt, gt_other) + 0.05
 
 
+@pytest.mark.parametrize("gap_px", [1.0, 2.0])
+def test_refine_identical_car_touching_merged_blob_rejected_against_tracker_box(gap_px: float) -> None:
+    """Two identical cars side by side with a 1-2 px gap merge into one blob (closing bridges the gap);
+    checked against the tracker's box, that blob fills twice the box and is rejected, while the blob of
+    a lone car (any turn) passes."""
+    centre = np.array([110.4, 126.9])
+    refiner, sand, paint, box = _initialised(7, centre)
+    rng = np.random.default_rng(7)
+    other = centre + np.array([CAR_WH_PX[0] + gap_px, 0.0])
+    image, _ = _draw(rng, sand, paint, [(centre, CAR_WH_PX, 0.0), (other, CAR_WH_PX, 0.0)])
+    merged = refiner.refine(image, centre, box, size_reference=box)
+    assert merged is not None and not merged.accepted and "fills" in merged.rejection
+    for angle_deg in (0.0, 45.0, 90.0):
+        lone, _ = _draw(rng, sand, paint, [(centre, CAR_WH_PX, angle_deg)])
+        ref = refiner.refine(lone, centre, box, size_reference=box)
+        assert ref is not None and ref.accepted, ref.rejection
+
+
 def test_refine_car_touching_big_red_blob_rejected_and_model_kept() -> None:
     centre = np.array([110.4, 126.9])
     refiner, sand, paint, box = _initialised(6, centre)
