@@ -7,6 +7,7 @@ the policy's action flows back as a velocity setpoint.
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 from typing import Any
 
 import gymnasium as gym
@@ -20,7 +21,7 @@ from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.ground_truth import GroundTruth, VehicleBox, box_corners, compute_ground_truth
 from trade_gym.observation import build_observation, observation_space
-from trade_gym.perception.base import PerceptionOutput, SensorFrame
+from trade_gym.perception.base import PerceptionOutput, SensorFilter, SensorFrame
 from trade_gym.perception.factory import make_perception
 from trade_gym.reward import RewardConfig, compute_reward
 from trade_gym.sim.camera import Camera, CameraConfig, CameraFrame
@@ -100,14 +101,15 @@ class TradeFollowEnv(gym.Env):
         self.imu_config = ImuConfig(enabled=self.config.imu_noise)
         self.action_space = spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
         self.observation_space = observation_space()
-        self._action_scale = np.array([
+        self._action_scale = (
             self.quad_config.max_speed_horizontal_mps,
             self.quad_config.max_speed_horizontal_mps,
             self.quad_config.max_speed_vertical_mps,
             self.quad_config.max_yaw_rate_radps,
-        ])
+        )
         self._client: int | None = p.connect(p.DIRECT)
         self.camera = Camera(self._client, self.camera_config)
+        self._T_cam_body = self.camera.T_body_cam.inverse()
         self.quadrotor = Quadrotor(self._client, self.quad_config)
         self.world: World | None = None
         self.perception = make_perception(self.config, self.camera.intrinsics, self._true_camera_pose)
@@ -115,6 +117,7 @@ class TradeFollowEnv(gym.Env):
         self._last_truth: GroundTruth | None = None
         self._last_estimate = PerceptionOutput.missing()
         self._needs_reset = True
+        self._sensor_filter: SensorFilter | None = None
 
     # ----------------------------------------------------------------- gym API
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -124,7 +127,8 @@ class TradeFollowEnv(gym.Env):
         p.setGravity(0.0, 0.0, -GRAVITY_MPS2, physicsClientId=cid)
         p.setTimeStep(1.0 / PHYSICS_RATE_HZ, physicsClientId=cid)
         rng = self.np_random
-        self.world = build_world(cid, self.config.scene, rng, self.config.target_speed_mps)
+        world_rng = rng if self.config.world_seed is None else np.random.default_rng(self.config.world_seed)
+        self.world = build_world(cid, self.config.scene, world_rng, self.config.target_speed_mps)
         start_position, start_yaw = self.world.drone_start()
         self.quadrotor.spawn(start_position, start_yaw)
         self.imu = Imu(self.imu_config, rng)
@@ -141,8 +145,9 @@ class TradeFollowEnv(gym.Env):
         # The paper's protocol: the first tracked frame shifts randomly within N frames.
         shift = int(rng.integers(0, self.config.init_frame_shift_max + 1))
         for _ in range(shift):
-            self._advance(np.zeros(ACTION_DIM))
+            self._advance([0.0] * ACTION_DIM)
         sensors, truth = self._sense()
+        sensors = self._filter_sensors(sensors, truth)
         init_box = self._perturbed_init_box(truth.target_bbox, rng)
         estimate = self.perception.reset(sensors, init_box, truth, rng)
         self._last_estimate, self._last_truth = estimate, truth
@@ -158,6 +163,7 @@ class TradeFollowEnv(gym.Env):
         action = self._validate_action(action)
         crashed = self._advance(action)
         sensors, truth = self._sense()
+        sensors = self._filter_sensors(sensors, truth)
         estimate = self.perception.step(sensors, truth)
         self._time_lost_s = 0.0 if estimate.valid else self._time_lost_s + self.config.frame_dt_s
         visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
@@ -191,42 +197,63 @@ class TradeFollowEnv(gym.Env):
     def close(self) -> None:
         if self._client is not None:
             try:
+                self.camera.close()
                 p.disconnect(physicsClientId=self._client)
             except p.error:
                 pass
             self._client = None
         super().close()
 
+    def set_sensor_filter(self, sensor_filter: SensorFilter | None) -> None:
+        """Install (None: remove) a transform of the sensors between the simulator and perception; it
+        applies from the next reset or step (see `SensorFilter`; `trade_gym.faults` uses it)."""
+        self._sensor_filter = sensor_filter
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickling keeps the configuration and the random generator (so `reset()` without a seed
+        continues the same stream); not the simulation, the episode or a sensor filter. The copy
+        connects its own pybullet client and needs `reset()` before `step()`."""
+        return {"config": self.config, "np_random": self._np_random, "np_random_seed": self._np_random_seed}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        config = state["config"]
+        self.__init__(**{f.name: getattr(config, f.name) for f in fields(config)})
+        self._np_random, self._np_random_seed = state["np_random"], state["np_random_seed"]
+
     # --------------------------------------------------------------- internals
+    def _filter_sensors(self, sensors: SensorFrame, truth: GroundTruth) -> SensorFrame:
+        if self._sensor_filter is None:
+            return sensors
+        return self._sensor_filter.filter_sensors(sensors, truth)
+
     def _require_client(self) -> int:
         if self._client is None:
             raise RuntimeError("reset() called after close(); create a new env")
         return self._client
 
-    def _validate_action(self, action) -> np.ndarray:
+    def _validate_action(self, action) -> list[float]:
+        """The action as ACTION_DIM floats clipped to [-1, 1]; ValueError for a wrong shape or a
+        non-finite value. (Plain floats: the step's scalar maths is cheaper on them than on arrays.)"""
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (ACTION_DIM,):
             raise ValueError(f"action must have shape ({ACTION_DIM},), got shape {a.shape}: {action!r}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action of shape ({ACTION_DIM},) must be finite, got {a.tolist()}")
-        return np.clip(a, -1.0, 1.0)
+        values = a.tolist()
+        if not all(math.isfinite(v) for v in values):
+            raise ValueError(f"action of shape ({ACTION_DIM},) must be finite, got {values}")
+        return [min(max(v, -1.0), 1.0) for v in values]
 
-    def _advance(self, action: np.ndarray) -> bool:
+    def _advance(self, action: list[float]) -> bool:
         """Run one camera frame of physics under the action; True if the drone crashed."""
-        cid = self._client
-        scaled = action * self._action_scale
-        self.quadrotor.set_setpoint(scaled[:3], scaled[3])
+        fwd, left, up, yaw_rate = (a * s for a, s in zip(action, self._action_scale))
+        self.quadrotor.set_setpoint((fwd, left, up), yaw_rate)
         dt = 1.0 / PHYSICS_RATE_HZ
-        previous = self._state.position_m
-        for _ in range(self.config.physics_steps_per_frame):
-            self.quadrotor.physics_step(dt)
-            p.stepSimulation(physicsClientId=cid)
-            self._t_s += dt
-            self.imu.add_truth(self._t_s, *self.quadrotor.read_imu_truth())
-        self._state = self.quadrotor.read_state()
-        self._distance_flown_m += float(np.linalg.norm(self._state.position_m - previous))
+        previous = self._state.position_m.tolist()
+        quadrotor = self.quadrotor
+        self._t_s = quadrotor.fly(self.config.physics_steps_per_frame, dt, self._t_s, self.imu.add_truth)
+        self._state = quadrotor.read_state()
+        self._distance_flown_m += math.dist(self._state.position_m.tolist(), previous)
         self.world.update(self._t_s)
-        return self.quadrotor.collided(self.world.static_body_ids) or self._below_surface()
+        return quadrotor.collided(self.world.static_body_ids) or self._below_surface()
 
     def _below_surface(self) -> bool:
         x, y, z = self._state.position_m
@@ -238,8 +265,14 @@ class TradeFollowEnv(gym.Env):
 
     def _sense(self) -> tuple[SensorFrame, GroundTruth]:
         T_world_cam = self.camera.pose(self._state.R_world_body, self._state.position_m)
+        if self._sensor_filter is not None:  # e.g. a camera knocked out of its mount: renders and truth see it
+            T_world_cam = self._sensor_filter.filter_camera_pose(T_world_cam)
         self._T_world_cam_true = T_world_cam
-        frame = self.camera.render(T_world_cam) if self.config.needs_rendering else None
+        if self.config.needs_rendering:
+            self.world.place_vehicle_bodies()
+            frame = self.camera.render(T_world_cam)
+        else:
+            frame = None
         self._last_frame = frame
         target_box = self._vehicle_box(self.world.target)
         truth = compute_ground_truth(
@@ -251,7 +284,7 @@ class TradeFollowEnv(gym.Env):
             self._vehicle_corners(target_box) if frame is None else np.zeros((0, 8, 3)),
             None if frame is None else frame.seg,
             self.world.target.body_id,
-            [d.body_id for d in self.world.decoys],
+            self._decoy_ids,
             max_range_m=self._state.position_m[2] + GROUND_RAY_RANGE_M,
         )
         T_est = self.pose_source.estimate(T_world_cam, self._distance_flown_m)
@@ -259,17 +292,21 @@ class TradeFollowEnv(gym.Env):
         return sensors, truth
 
     def _vehicle_corners(self, target_box: VehicleBox) -> np.ndarray:
-        """(1 + D, 8, 3) world corners of the target and the decoys; parked decoys' corners are
-        computed once per episode."""
-        corners = self._decoy_corners
+        """(1 + D, 8, 3) world corners of the target and the decoys, in one buffer refilled in place
+        (read-only for callers); parked decoys' corners are computed once per episode."""
+        corners = self._corners
+        corners[0] = box_corners(target_box)
         for i, decoy in self._moving_decoys:
-            corners[i] = box_corners(self._vehicle_box(decoy))
-        return np.concatenate([box_corners(target_box)[None], corners])
+            corners[1 + i] = box_corners(self._vehicle_box(decoy))
+        return corners
 
     def _cache_parked_decoys(self) -> None:
         decoys = self.world.decoys
+        self._decoy_ids = [d.body_id for d in decoys]
         self._moving_decoys = [(i, d) for i, d in enumerate(decoys) if d.motion.is_moving]
-        self._decoy_corners = np.array([box_corners(self._vehicle_box(d)) for d in decoys]).reshape(-1, 8, 3)
+        self._corners = np.zeros((1 + len(decoys), 8, 3))
+        for i, decoy in enumerate(decoys):
+            self._corners[1 + i] = box_corners(self._vehicle_box(decoy))
 
     def _vehicle_box(self, vehicle) -> VehicleBox:
         position, R = self.world.vehicle_pose(vehicle, self._t_s)
@@ -282,9 +319,9 @@ class TradeFollowEnv(gym.Env):
         return box + np.concatenate([rng.uniform(-jitter, jitter, 2), np.zeros(2)])
 
     def _observe(self, estimate: PerceptionOutput, sensors: SensorFrame) -> dict[str, np.ndarray]:
-        T_world_body_est = sensors.T_world_cam.compose(self.camera.T_body_cam.inverse())
-        forward = T_world_body_est.R[:, 0]
-        yaw_est = float(np.arctan2(forward[1], forward[0]))
+        T_world_body_est = sensors.T_world_cam.compose(self._T_cam_body)
+        forward = T_world_body_est.R[:, 0].tolist()
+        yaw_est = math.atan2(forward[1], forward[0])
         return build_observation(
             estimate,
             drone_position_est_m=T_world_body_est.t,
@@ -297,9 +334,10 @@ class TradeFollowEnv(gym.Env):
 
     def _info(self, truth: GroundTruth, estimate: PerceptionOutput, crashed: bool,
               terms: dict[str, float] | None) -> dict[str, Any]:
-        est_iou = iou(truth.target_bbox, estimate.bbox)
-        # decoys in view only (usually none or a few): scalar IoU beats array set-up here
-        best_decoy = max((iou(d, estimate.bbox) for d in truth.decoy_bboxes if d[0] == d[0]), default=0.0)
+        est_box = estimate.bbox.tolist()  # plain floats: scalar IoU on lists beats numpy on 4-vectors
+        est_iou = iou(truth.target_bbox.tolist(), est_box)
+        decoys_in_view = [tuple(d) for d in truth.decoy_bboxes.tolist() if d[0] == d[0]]  # k <= D, usually <= 2
+        best_decoy = max((iou(d, est_box) for d in decoys_in_view), default=0.0)
         drone = self._state.position_m
         info: dict[str, Any] = {
             "t_s": self._t_s,
@@ -320,8 +358,9 @@ class TradeFollowEnv(gym.Env):
             "target_position_m": truth.target_position_m,
             "horizontal_distance_m": math.hypot(truth.target_position_m[0] - drone[0],
                                                 truth.target_position_m[1] - drone[1]),
-            # Only the decoys in view, so the array holds no NaN rows: (k, 4) [px].
-            "decoy_bboxes": truth.decoy_bboxes[~np.isnan(truth.decoy_bboxes[:, 0])],
+            # The boxes (x, y, w, h) [px] of the decoys in view, as a tuple of tuples: no NaN (check_env
+            # compares infos) and no ndarray whose shape changes per frame (vector envs stack those).
+            "decoy_bboxes": tuple(decoys_in_view),
         }
         for name, value in (terms or {}).items():
             info[f"reward_{name}"] = value

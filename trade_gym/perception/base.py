@@ -47,6 +47,31 @@ class SensorFrame:
     imu: ImuBatch
 
 
+def finite_imu(imu: ImuBatch) -> ImuBatch:
+    """The samples of `imu` whose time, specific force and rate are all finite (a faulty IMU's NaN/inf
+    samples are dropped at the sensor boundary); `imu` itself when every sample is finite."""
+    good = (np.isfinite(imu.t_s) & np.all(np.isfinite(imu.accel_mps2), axis=1)
+            & np.all(np.isfinite(imu.gyro_radps), axis=1))
+    if good.all():
+        return imu
+    return ImuBatch(imu.t_s[good], imu.accel_mps2[good], imu.gyro_radps[good])
+
+
+class SensorFilter(Protocol):
+    """Transforms what the sensors deliver before perception sees it (`TradeFollowEnv.set_sensor_filter`);
+    `trade_gym.faults.SensorFaults` injects faults through it."""
+
+    def filter_camera_pose(self, T_world_cam: Pose) -> Pose:
+        """The pose the camera actually has this frame, given its mounted pose; rendering, ground truth and
+        the pose source all use the result (e.g. a camera knocked sideways)."""
+        ...
+
+    def filter_sensors(self, sensors: SensorFrame, truth: GroundTruth) -> SensorFrame:
+        """The frame perception receives (e.g. blank, dropped: rgb None, stale, corrupt IMU samples);
+        `truth` is read-only context (where the target is)."""
+        ...
+
+
 class Perception(Protocol):
     """A perception mode. `truth` is consumed only by the oracle (and to initialise trackers)."""
 

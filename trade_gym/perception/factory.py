@@ -20,6 +20,8 @@ def make_perception(config: EnvConfig, intrinsics: CameraIntrinsics,
                 depth_sigma_frac=config.oracle_depth_sigma_frac,
                 velocity_sigma_mps=config.oracle_velocity_sigma_mps,
                 dropout_prob=config.oracle_dropout_prob,
+                noise_correlation_s=config.oracle_noise_correlation_s,
+                first_fix_delay_s=config.oracle_first_fix_delay_s,
             ),
             true_camera_pose,
         )

@@ -9,6 +9,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 
 from trade.geometry import Pose
@@ -17,20 +19,26 @@ from trade_gym.perception.base import FloatArray, PerceptionOutput, SensorFrame
 
 MIN_BOX_SIDE_PX = 1.0
 N_NORMAL_DRAWS = 11
+N_CORRELATED = 10  # box (4), position (3), velocity (3) follow the Gauss-Markov process; ground stays white
 
 
 @dataclass(frozen=True)
 class OracleConfig:
     """Noise model: Gaussian box jitter [px], position noise as a fraction of depth, velocity
-    noise [m/s], and a per-frame dropout probability (the estimate then coasts)."""
+    noise [m/s], a per-frame dropout probability (the estimate then coasts), the correlation time of
+    the box, position and velocity noise [s] (first-order Gauss-Markov; 0 = white) and the delay after
+    reset before the first 3D position and velocity exist [s] (TRADE needs its ROI depths first)."""
 
     box_sigma_px: float = 1.5
     depth_sigma_frac: float = 0.02
     velocity_sigma_mps: float = 0.2
     dropout_prob: float = 0.0
+    noise_correlation_s: float = 0.0
+    first_fix_delay_s: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("box_sigma_px", "depth_sigma_frac", "velocity_sigma_mps"):
+        for name in ("box_sigma_px", "depth_sigma_frac", "velocity_sigma_mps", "noise_correlation_s",
+                     "first_fix_delay_s"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"OracleConfig.{name} must be finite and >= 0, got {value!r}")
@@ -46,24 +54,43 @@ class OraclePerception:
         self._true_pose = T_world_cam_true  # the camera's true pose now
         self._rng = np.random.default_rng(0)
         self._last = PerceptionOutput.missing()
+        self._noise: np.ndarray | None = None  # (N_CORRELATED,) unit-variance Gauss-Markov state
+        self._t_reset_s = 0.0
+        self._t_last_s = 0.0
 
     def reset(self, sensors: SensorFrame, init_box: FloatArray, truth: GroundTruth,
               rng: np.random.Generator) -> PerceptionOutput:
         self._rng = rng
         self._last = PerceptionOutput.missing()
+        self._noise = None
+        self._t_reset_s = self._t_last_s = sensors.t_s
         return self.step(sensors, truth)
+
+    def _unit_noise(self, draws: np.ndarray, t_s: float) -> np.ndarray:
+        """n_k = rho n_{k-1} + sqrt(1 - rho^2) w_k with rho = exp(-dt / tau), w_k ~ N(0, 1): stationary unit
+        variance, correlation time tau; white (n_k = w_k) for tau = 0 or at the first frame."""
+        tau, dt = self.config.noise_correlation_s, t_s - self._t_last_s
+        self._t_last_s = t_s
+        if self._noise is None or tau <= 0.0:
+            self._noise = draws.copy()
+        else:
+            rho = math.exp(-max(dt, 0.0) / tau)
+            self._noise = rho * self._noise + math.sqrt(1.0 - rho * rho) * draws
+        return self._noise
 
     def step(self, sensors: SensorFrame, truth: GroundTruth) -> PerceptionOutput:
         cfg = self.config
         # Draw every noise term each frame so the random stream does not depend on visibility.
         draws = self._rng.standard_normal(N_NORMAL_DRAWS)  # one call: box (4), position (3), velocity (3), ground
-        box_noise = draws[0:4] * cfg.box_sigma_px
-        pos_noise = draws[4:7]
-        vel_noise = draws[7:10] * cfg.velocity_sigma_mps
+        dt_s = sensors.t_s - self._t_last_s
+        noise = self._unit_noise(draws[:N_CORRELATED], sensors.t_s)
+        box_noise = noise[0:4] * cfg.box_sigma_px
+        pos_noise = noise[4:7]
+        vel_noise = noise[7:10] * cfg.velocity_sigma_mps
         ground_noise = float(draws[10])
         dropped = self._rng.random() < cfg.dropout_prob
         if dropped or not np.all(np.isfinite(truth.target_bbox)):
-            self._last = _coast(self._last)
+            self._last = _coast(self._last, dt_s)
             return self._last
         bbox = truth.target_bbox + box_noise
         bbox[2:] = np.maximum(bbox[2:], MIN_BOX_SIDE_PX)
@@ -76,6 +103,11 @@ class OraclePerception:
         R_err = sensors.T_world_cam.R @ T_cam_world_true.R
         velocity = R_err @ truth.target_velocity_mps + vel_noise
         ground = truth.ground_depth_m * (1.0 + cfg.depth_sigma_frac * ground_noise)
+        if sensors.t_s - self._t_reset_s < cfg.first_fix_delay_s:
+            # No 3D fix yet: a box, but no position, velocity or depth (as TRADE before its ROI depths exist).
+            position, velocity = np.full(3, np.nan), np.full(3, np.nan)
+            target_cam = np.full(3, np.nan)
+            depth_sigma = float("nan")
         self._last = PerceptionOutput(
             bbox=bbox,
             position_world_m=position,
@@ -88,11 +120,12 @@ class OraclePerception:
         return self._last
 
 
-def _coast(last: PerceptionOutput) -> PerceptionOutput:
-    """Keep the last world estimate but report no fresh box."""
+def _coast(last: PerceptionOutput, dt_s: float) -> PerceptionOutput:
+    """No fresh box: the world estimate moves on at its last velocity, p_k = p_{k-1} + v_{k-1} dt
+    (as TRADE's trajectory model predicts while the tracker is lost)."""
     return PerceptionOutput(
         bbox=np.full(4, np.nan),
-        position_world_m=last.position_world_m,
+        position_world_m=last.position_world_m + last.velocity_world_mps * dt_s,
         velocity_world_mps=last.velocity_world_mps,
         target_depth_m=np.nan,
         target_depth_sigma_m=np.nan,
