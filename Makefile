@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m trade_gym.demo --out demo_out
+	$(VENV)/bin/trade-bench --suite quick --out demo_out
 
 test: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider

@@ -1,7 +1,8 @@
 """Scores of one episode, as pure functions over its per-step `info` records.
 
 Each function takes the list of info dicts an episode produced (in step order) and returns a
-number; NaN where the quantity is undefined (e.g. no frame with both depths).
+number; NaN where the quantity is undefined (e.g. no frame with both depths, no visible frame).
+Tracking scores (tracked fraction, success AUC, precision) count only frames with the target visible.
 """
 
 from __future__ import annotations
@@ -10,20 +11,97 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
+
+from trade_gym.config import CAMERA_RATE_HZ
 
 Info = dict[str, Any]
+FloatArray = npt.NDArray[np.float64]
+
 TRACKED_IOU = 0.3  # a frame is tracked when IoU >= this while the target is visible
+# OTB / UAV123 success plot: IoU thresholds 0, 0.05, ..., 1; a frame succeeds when IoU > threshold.
+SUCCESS_IOU_THRESHOLDS = np.linspace(0.0, 1.0, 21)
+PRECISION_CENTRE_PX = 20.0  # OTB precision: centre error <= 20 px
+FRAME_DT_S = 1.0 / CAMERA_RATE_HZ  # one env step = one camera frame
+DEPTH_KINDS = ("ground", "target")
+
+# Names of the scores `episode_metrics` returns (deterministic: no timing in here).
+METRIC_NAMES = (
+    "steps", "visible_fraction", "tracked_fraction", "success_auc", "precision_20px",
+    "longest_lost_streak_s", "decoy_switches", "ground_depth_rmse_m", "ground_depth_frames",
+    "target_depth_rmse_m", "target_depth_frames", "mean_horizontal_error_m", "crashed",
+)
+
+
+def _column(infos: Sequence[Info], key: str, dtype: type = np.float64) -> np.ndarray:
+    """(T,) array of `info[key]` over the episode."""
+    return np.array([i[key] for i in infos], dtype=dtype)
+
+
+def _visible(infos: Sequence[Info]) -> npt.NDArray[np.bool_]:
+    return _column(infos, "target_visible", bool) if infos else np.zeros(0, bool)
 
 
 def visible_fraction(infos: Sequence[Info]) -> float:
     """Fraction of frames in which the target is visible."""
-    return float(np.mean([i["target_visible"] for i in infos])) if infos else float("nan")
+    return float(np.mean(_visible(infos))) if infos else float("nan")
 
 
 def tracked_fraction(infos: Sequence[Info], iou_threshold: float = TRACKED_IOU) -> float:
     """Fraction of the frames with the target visible whose estimated box has IoU >= threshold."""
     ious = np.array([i["iou"] for i in infos if i["target_visible"]], dtype=np.float64)
     return float(np.mean(ious >= iou_threshold)) if len(ious) else float("nan")
+
+
+def success_auc(infos: Sequence[Info], thresholds: FloatArray = SUCCESS_IOU_THRESHOLDS) -> float:
+    """Area under the OTB success curve over the visible frames.
+
+    success(tau) = #{frames: IoU > tau} / #frames for tau in `thresholds`; AUC = mean_tau success(tau).
+    As in the OTB/UAV123 toolkits a perfect track scores 20/21 (IoU > 1 never holds)."""
+    ious = np.array([i["iou"] for i in infos if i["target_visible"]], dtype=np.float64)
+    if not len(ious):
+        return float("nan")
+    success = np.mean(ious[None, :] > np.asarray(thresholds)[:, None], axis=1)  # (K,)
+    return float(np.mean(success))
+
+
+def centre_errors_px(infos: Sequence[Info]) -> FloatArray:
+    """(T,) distance [px] between the estimated and true box centres; inf where the estimate is
+    missing, NaN where the true box is."""
+    if not infos:
+        return np.zeros(0)
+    gt = np.array([i["gt_bbox"] for i in infos], dtype=np.float64).reshape(-1, 4)
+    est = np.array([i["est_bbox"] for i in infos], dtype=np.float64).reshape(-1, 4)
+    # centre = (x + w/2, y + h/2)
+    d = np.linalg.norm((est[:, :2] + est[:, 2:] / 2.0) - (gt[:, :2] + gt[:, 2:] / 2.0), axis=1)
+    d[~np.all(np.isfinite(est), axis=1)] = np.inf
+    d[~np.all(np.isfinite(gt), axis=1)] = np.nan
+    return d
+
+
+def precision_at(infos: Sequence[Info], threshold_px: float = PRECISION_CENTRE_PX) -> float:
+    """OTB precision: fraction of visible frames (with a true box) whose centre error <= threshold."""
+    err = centre_errors_px(infos)
+    scored = _visible(infos) & ~np.isnan(err)
+    return float(np.mean(err[scored] <= threshold_px)) if scored.any() else float("nan")
+
+
+def longest_run(flags: npt.ArrayLike) -> int:
+    """Length of the longest run of consecutive True values."""
+    f = np.concatenate([[False], np.asarray(flags, bool), [False]]).astype(np.int8)
+    edges = np.diff(f)
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return int(np.max(ends - starts)) if len(starts) else 0
+
+
+def longest_lost_streak_s(infos: Sequence[Info], frame_dt_s: float = FRAME_DT_S,
+                          iou_threshold: float = TRACKED_IOU) -> float:
+    """Longest stretch [s] of consecutive frames in which the target is not tracked: hidden from the
+    camera, or visible with IoU < threshold (streak frames x frame period)."""
+    if not infos:
+        return float("nan")
+    tracked = _visible(infos) & (_column(infos, "iou") >= iou_threshold)
+    return longest_run(~tracked) * frame_dt_s
 
 
 def decoy_switches(infos: Sequence[Info]) -> int:
@@ -34,27 +112,58 @@ def decoy_switches(infos: Sequence[Info]) -> int:
     return int(on[0]) + int(np.sum(on[1:] & ~on[:-1]))
 
 
+def depth_errors_m(infos: Sequence[Info], kind: str) -> FloatArray:
+    """(T,) signed error `<kind>_depth_est - <kind>_depth_gt` [m]; NaN where either is missing."""
+    if kind not in DEPTH_KINDS:
+        raise ValueError(f"kind must be one of {DEPTH_KINDS}, got {kind!r}")
+    if not infos:
+        return np.zeros(0)
+    return _column(infos, f"{kind}_depth_est") - _column(infos, f"{kind}_depth_gt")
+
+
 def depth_rmse(infos: Sequence[Info], kind: str) -> float:
     """RMSE [m] of `<kind>_depth_est` against `<kind>_depth_gt` (kind: "ground" or "target") over
     frames where both exist."""
-    pairs = np.array([(i[f"{kind}_depth_est"], i[f"{kind}_depth_gt"]) for i in infos], dtype=np.float64)
-    if not len(pairs):
-        return float("nan")
-    both = np.all(np.isfinite(pairs), axis=1)
-    if not both.any():
-        return float("nan")
-    return float(np.sqrt(np.mean((pairs[both, 0] - pairs[both, 1]) ** 2)))
+    err = depth_errors_m(infos, kind)
+    err = err[np.isfinite(err)]
+    return float(np.sqrt(np.mean(err ** 2))) if len(err) else float("nan")
 
 
 def depth_frames(infos: Sequence[Info], kind: str) -> int:
     """Frames where both the estimated and the true `kind` depth exist."""
-    return int(sum(np.isfinite(i[f"{kind}_depth_est"]) and np.isfinite(i[f"{kind}_depth_gt"]) for i in infos))
+    return int(np.sum(np.isfinite(depth_errors_m(infos, kind))))
 
 
 def mean_horizontal_distance(infos: Sequence[Info]) -> float:
-    """Mean horizontal distance [m] between the drone and the target."""
-    return float(np.mean([i["horizontal_distance_m"] for i in infos])) if infos else float("nan")
+    """Mean horizontal distance [m] between the drone and the target: the following error of a
+    follower that keeps the target under a downward camera."""
+    return float(np.mean(_column(infos, "horizontal_distance_m"))) if infos else float("nan")
 
 
 def crashed(infos: Sequence[Info]) -> bool:
-    return any(i["crashed"] for i in infos)
+    """Whether any step reported a crash."""
+    return any(bool(i["crashed"]) for i in infos)
+
+
+def steps_per_second(steps: int, wall_s: float) -> float:
+    """Env steps per wall-clock second (a timing figure, kept apart from the scores)."""
+    return steps / wall_s if wall_s > 0.0 else float("nan")
+
+
+def episode_metrics(infos: Sequence[Info], frame_dt_s: float = FRAME_DT_S) -> dict[str, float | int | bool]:
+    """All scores of one episode, keyed by `METRIC_NAMES`."""
+    return {
+        "steps": len(infos),
+        "visible_fraction": visible_fraction(infos),
+        "tracked_fraction": tracked_fraction(infos),
+        "success_auc": success_auc(infos),
+        "precision_20px": precision_at(infos),
+        "longest_lost_streak_s": longest_lost_streak_s(infos, frame_dt_s),
+        "decoy_switches": decoy_switches(infos),
+        "ground_depth_rmse_m": depth_rmse(infos, "ground"),
+        "ground_depth_frames": depth_frames(infos, "ground"),
+        "target_depth_rmse_m": depth_rmse(infos, "target"),
+        "target_depth_frames": depth_frames(infos, "target"),
+        "mean_horizontal_error_m": mean_horizontal_distance(infos),
+        "crashed": crashed(infos),
+    }

@@ -1,0 +1,212 @@
+"""trade-bench: suites as data, argument validation, aggregation, reference tolerances, and one tiny
+end-to-end run (oracle perception) checked for schema validity and serial/parallel equality."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import jsonschema
+import numpy as np
+import pytest
+
+from trade_gym.bench import cli, reference, runner
+from trade_gym.bench.plots import nanmean_ragged
+from trade_gym.bench.policies import HoverPolicy, available_policies, learned_unavailable_reason, make_policy
+from trade_gym.bench.report import render_markdown, table1_pivot
+from trade_gym.bench.results import deterministic_part, load_schema, to_json_safe
+from trade_gym.bench.suites import SUITES, RunSpec, Selection, expand_suite
+from trade_gym.bench.summary import metric_stats, pooled_rmse, summarise
+from trade_gym.config import SCENE_NAMES
+from trade_gym.metrics import METRIC_NAMES
+
+ALL = ("scripted", "learned", "hover", "random")
+
+
+def _no_episodes(*args, **kwargs):
+    raise AssertionError("an episode ran although the arguments were invalid")
+
+
+BAD_ARGUMENTS = {
+    "unknown scene": ["--scenes", "moon"],
+    "unknown policy": ["--policies", "dance"],
+    "seed range reversed": ["--seeds", "5", "2"],
+    "unknown ablation switch": ["--ablation", "warp_drive=true"],
+    "tables without suite": ["--tables", "table1"],
+    "unknown suite group": ["--suite", "quick", "--tables", "table9"],
+    "reference of an overridden suite": ["--suite", "quick", "--steps", "10", "--write-reference"],
+}
+
+
+@pytest.mark.parametrize("name", BAD_ARGUMENTS)
+def test_cli_bad_argument_exits_2_with_one_line_before_any_episode(name, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(cli, "run_all", _no_episodes)
+    status = cli.main(BAD_ARGUMENTS[name] + ["--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err.startswith("trade-bench: error: ") and err.count("\n") == 1, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_cli_missing_output_parent_exits_2(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(cli, "run_all", _no_episodes)
+    assert cli.main(["--out", str(tmp_path / "absent" / "out")]) == 2
+    assert "parent folder" in capsys.readouterr().err
+
+
+def test_cli_learned_policy_error_only_when_its_model_is_missing(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(cli, "run_all", _no_episodes)
+    status = cli.main(["--policies", "learned", "--list"])
+    if learned_unavailable_reason() is None:
+        assert status == 0 and "learned" in capsys.readouterr().out
+    else:
+        assert status == 2 and "policy 'learned' is not available" in capsys.readouterr().err
+        assert "learned" not in available_policies()
+
+
+def test_cli_subprocess_bad_scene_stderr_is_exactly_one_line(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "trade_gym.bench.cli", "--scenes", "moon", "--out", str(tmp_path)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.splitlines() == [proc.stderr.strip()] and proc.stderr.startswith("trade-bench: error:")
+
+
+def test_quick_suite_covers_every_scene_followers_and_perceptions():
+    runs = expand_suite("quick", Selection(), ALL)
+    assert {r.scene for r in runs} == set(SCENE_NAMES)
+    assert {r.policy for r in runs} == set(ALL)
+    assert {r.perception for r in runs} == {"oracle", "trade", "dcf"}
+    assert len({r.run_id for r in runs}) == len(runs)
+
+
+def test_paper_suite_follows_protocol_and_run_counts():
+    runs = expand_suite("paper", Selection(), ALL)
+    by_group = {g.name: [r for r in runs if r.group == g.name] for g in SUITES["paper"]}
+    assert len(by_group["table1"]) == 3 * 2 * 4 * 5  # scenes x pose x (fusion x mask) x 5 runs
+    assert len(by_group["table2"]) == 3 * 2 * 5  # scenes x RANSAC off/on x 5 runs
+    assert len(by_group["tracking"]) == 3 * 2 * 10  # scenes x (trade, dcf) x 10 runs
+    for r in runs:
+        kw = r.env_kwargs()
+        assert kw["init_frame_shift_max"] == 10 and kw["init_box_perturb_px"] == 5.0
+    assert all(r.env_kwargs()["single_image_depth"] for r in by_group["table2"])
+    assert {r.switch_value("depth_only_ransac") for r in by_group["table2"]} == {False, True}
+    assert {r.pose_source for r in by_group["tracking"]} == {"vio"}
+    cli.validate_runs(runs)  # every configuration is accepted by EnvConfig and the stack's config
+
+
+def test_selection_filters_axes_and_overrides_seeds_and_steps():
+    sel = Selection(scenes=("city",), perceptions=("dcf",), seeds=(3, 4), steps=42)
+    runs = expand_suite("quick", sel, ALL)
+    assert [r.run_id for r in runs] == ["tracking/city/scripted/dcf/gt/seed3", "tracking/city/scripted/dcf/gt/seed4"]
+    assert all(r.steps == 42 and r.env_kwargs()["episode_duration_s"] == pytest.approx(42 / 30) for r in runs)
+
+
+def test_ablation_filter_keeps_runs_with_matching_switch_value():
+    runs = expand_suite("paper", Selection(switches=(("ground_mask", (True,)),), groups=("table1",)), ALL)
+    assert len(runs) == 60 and all(r.switch_value("ground_mask") for r in runs)
+
+
+def test_custom_grid_without_suite_sweeps_both_switch_values():
+    runs = expand_suite(None, Selection(scenes=("desert",), switches=(("imu_noise", (False, True)),)), ALL)
+    assert [r.switch_value("imu_noise") for r in runs] == [False, True]
+
+
+def test_unavailable_policy_dropped_from_suite_expansion():
+    runs = expand_suite("quick", Selection(), ("scripted", "hover", "random"))
+    assert "learned" not in {r.policy for r in runs} and runs
+
+
+def test_random_policy_seeded_reproducible_and_hover_is_zero():
+    a, b, c = (make_policy("random", s, 90.0) for s in (3, 3, 4))
+    obs = {}
+    acts = [p.predict(obs)[0] for p in (a, b, c)]
+    np.testing.assert_array_equal(acts[0], acts[1])
+    assert not np.array_equal(acts[0], acts[2]) and np.all(np.abs(acts[0]) <= 1.0)
+    np.testing.assert_array_equal(HoverPolicy().predict(obs)[0], np.zeros(4))
+
+
+def test_pooled_rmse_weights_runs_by_frame_count():
+    # run 1: 1 frame at error 3 m; run 2: 3 frames at 1 m -> sqrt((9 + 3) / 4)
+    assert pooled_rmse([3.0, 1.0], [1, 3]) == pytest.approx(math.sqrt(3.0))
+    assert pooled_rmse([3.0, math.nan], [1, 0]) == pytest.approx(3.0)
+    assert math.isnan(pooled_rmse([math.nan], [0]))
+
+
+def test_metric_stats_single_value_has_undefined_spread():
+    s = metric_stats([2.0, math.nan])
+    assert s["mean"] == 2.0 and s["n"] == 1 and math.isnan(s["std"])
+    assert metric_stats([1.0, 3.0])["std"] == pytest.approx(math.sqrt(2.0))
+
+
+def test_nanmean_ragged_averages_runs_of_different_lengths():
+    np.testing.assert_allclose(nanmean_ragged([[1.0, 2.0, 3.0], [3.0, np.nan]]), [2.0, 2.0, 3.0])
+
+
+def _record(scene, pose, tf, gm, rmse):
+    return {"scene": scene, "pose_source": pose, "switches": {"temporal_fusion": tf, "ground_mask": gm},
+            "pooled_ground_depth_rmse_m": rmse}
+
+
+def test_table1_pivot_cells_show_gt_then_vio_in_brackets():
+    records = [_record("desert", p, tf, gm, rmse=(1.0 if p == "gt" else 2.0) + tf + 10 * gm)
+               for p in ("gt", "vio") for tf in (False, True) for gm in (False, True)]
+    rows = table1_pivot(records)
+    assert rows[2] == "| ✗ | ✗ | 1 (2) |" and rows[5] == "| ✓ | ✓ | 12 (13) |"
+
+
+def test_tolerance_fails_only_degradations_beyond_margin():
+    ref = {"tracked_fraction": 0.9, "decoy_switches": 0, "ground_depth_rmse_m": 1.0, "crashed": False}
+    assert reference.compare_run("r", {"tracked_fraction": 0.86, "decoy_switches": 0, "ground_depth_rmse_m": 1.29,
+                                       "crashed": False}, ref) == []
+    assert reference.compare_run("r", {"tracked_fraction": 1.0, "decoy_switches": 0, "ground_depth_rmse_m": 0.1,
+                                       "crashed": False}, ref) == []
+    problems = reference.compare_run("r", {"tracked_fraction": 0.8, "decoy_switches": 1, "ground_depth_rmse_m": 1.4,
+                                           "crashed": True}, ref)
+    assert [p.split(" ")[1] for p in problems] == ["tracked_fraction", "decoy_switches", "ground_depth_rmse_m",
+                                                   "crashed"]
+    assert "undefined" in reference.compare_run("r", {"ground_depth_rmse_m": None}, ref)[0]
+
+
+def test_run_spec_exception_recorded_as_one_line_error(monkeypatch):
+    def broken(spec):
+        raise RuntimeError("the target is not in view at reset")
+
+    monkeypatch.setattr(runner, "fly", broken)
+    result = runner.run_spec(RunSpec("g", "custom", "desert", "hover", "oracle", "gt", 0, 5, 64))
+    assert result.metrics == {} and result.series is None
+    assert result.error.startswith("RuntimeError: the target is not in view") and "\n" not in result.error
+    md = render_markdown(summarise([result]), {"commit": "c", "date_utc": "d", "cpu": "x", "cores": 1,
+                                               "renderer": "r", "runs": 1, "wall_s": 1.0, "jobs": 1},
+                         {}, [f"{result.spec.run_id}: {result.error}"], [])
+    assert "## Failed runs" in md and "0/1" in md
+
+
+def test_run_all_parallel_metrics_equal_serial_on_oracle_runs():
+    specs = expand_suite(None, Selection(scenes=("desert", "city"), policies=("random",), seeds=(0, 1), steps=25), ALL)
+    parallel, serial = runner.run_all(specs, jobs=2), runner.run_all(specs, jobs=1)
+    assert [r.spec for r in parallel] == specs
+    # NaN (undefined scores) compared as null, as results.json stores them
+    assert to_json_safe([r.metrics for r in parallel]) == to_json_safe([r.metrics for r in serial])
+    assert all(r.error is None and r.metrics["steps"] == 25 for r in parallel)
+    np.testing.assert_array_equal(parallel[3].series.drone_xy_m, serial[3].series.drone_xy_m)
+
+
+def test_cli_tiny_oracle_run_writes_schema_valid_outputs_with_timing_apart(tmp_path, capsys):
+    args = ["--scenes", "desert", "--policies", "scripted", "hover", "--seeds", "0", "1", "--steps", "20"]
+    assert cli.main(args + ["--out", str(tmp_path / "a")]) == 0
+    doc = json.loads((tmp_path / "a" / "results.json").read_text())
+    jsonschema.validate(doc, load_schema())
+    assert len(doc["runs"]) == 4 and all(r["metrics"]["steps"] == 20 for r in doc["runs"])
+    assert doc["meta"]["jobs"] == 1 and doc["meta"]["renderer"] == "TinyRenderer"
+    assert all(r["timing"]["steps_per_s"] > 0 for r in doc["runs"])
+    assert all(set(r["metrics"]) == set(METRIC_NAMES) for r in doc["runs"])  # scores only, no timing
+    comparable = json.dumps(deterministic_part(doc))
+    assert "steps_per_s" not in comparable and "wall_s" not in comparable and doc["runs"][0]["run_id"] in comparable
+    md = (tmp_path / "a" / "results.md").read_text()
+    assert "| desert | hover oracle gt | 2/2 | 20 ± 0 |" in md
+    assert {"custom_iou.png", "custom_paths.png"} <= set(doc["files"]["plots"])
+    for name in doc["files"]["plots"]:
+        assert (tmp_path / "a" / name).stat().st_size > 0
+    assert "4 runs in" in capsys.readouterr().out

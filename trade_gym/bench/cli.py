@@ -1,0 +1,228 @@
+"""`trade-bench`: parse and validate the command line (every argument before any episode runs),
+run the chosen suite or grid, and write results.json, results.md, plots and optionally a video.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from trade_gym.bench import plots, reference, report
+from trade_gym.bench.policies import POLICY_NAMES, available_policies, learned_unavailable_reason
+from trade_gym.bench.results import build_document, collect_meta, load_schema, to_json_safe, write_json
+from trade_gym.bench.runner import RunResult, run_all
+from trade_gym.bench.suites import BOOL_SWITCHES, SUITE_JOBS, SUITES, RunSpec, Selection, expand_suite
+from trade_gym.bench.summary import summarise
+from trade_gym.config import PERCEPTION_MODES, POSE_SOURCES, SCENE_NAMES, EnvConfig
+
+PROG = "trade-bench"
+EXIT_USAGE, EXIT_FAILED = 2, 1
+SWITCH_VALUES = {"true": (True,), "on": (True,), "1": (True,), "false": (False,), "off": (False,), "0": (False,),
+                 "both": (False, True)}
+DEFAULT_CUSTOM_JOBS = 1
+MIN_STEPS, MIN_CAMERA_PX, MIN_JOBS = 1, 16, 1  # EnvConfig's camera_size floor is 16 px
+
+
+class UsageError(Exception):
+    """A bad argument: reported as one line, exit status 2, before any episode runs."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, no usage block
+        raise UsageError(message)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog=PROG, description="Score follower policies and perception variants on TradeFollow-v0. "
+                "With --suite, --scenes/--policies/--perceptions/--pose-sources/--ablation/--tables filter the "
+                "suite and --seeds/--steps/--camera-size override it; without, they define one grid.")
+    p.add_argument("--suite", choices=tuple(SUITES), help="quick (make demo, ~1-3 min), paper (the paper's "
+                   "tables, ~1 h on 2 cores), full (paper tables at full length plus all followers, hours)")
+    p.add_argument("--tables", nargs="+", metavar="GROUP", help="groups of the suite to run (see --list)")
+    p.add_argument("--scenes", nargs="+", choices=SCENE_NAMES)
+    p.add_argument("--policies", nargs="+", metavar="POLICY", help=f"any of {', '.join(POLICY_NAMES)}")
+    p.add_argument("--perceptions", nargs="+", choices=PERCEPTION_MODES)
+    p.add_argument("--pose-sources", nargs="+", choices=POSE_SOURCES)
+    p.add_argument("--ablation", action="append", default=[], metavar="SWITCH=VALUE",
+                   help=f"env switch ({', '.join(BOOL_SWITCHES)}) = true|false|both; repeatable")
+    p.add_argument("--seeds", nargs=2, type=int, metavar=("FIRST", "LAST"), help="seed range, inclusive")
+    p.add_argument("--steps", type=int, help="episode length [frames at 30 Hz]")
+    p.add_argument("--camera-size", type=int, help="camera image side [px]")
+    p.add_argument("--jobs", type=int, help="worker processes (default: the suite's, or 1)")
+    p.add_argument("--out", type=Path, help="output folder (created; its parent must exist)")
+    p.add_argument("--video", action="store_true", help="also write a video of the first run (flown again "
+                   "with rendering on; mp4, or GIF without an mp4 encoder)")
+    p.add_argument("--list", action="store_true", help="print the runs and exit without running them")
+    p.add_argument("--write-reference", nargs="?", const=reference.reference_path(), type=Path, metavar="PATH",
+                   help="quick suite only: write its metrics as the regression reference")
+    p.add_argument("--check-reference", nargs="?", const=reference.reference_path(), type=Path, metavar="PATH",
+                   help="compare the metrics with the regression reference; exit 1 on a regression")
+    return p
+
+
+def _selection(args: argparse.Namespace) -> Selection:
+    if args.policies:
+        for name in args.policies:
+            if name not in POLICY_NAMES:
+                raise UsageError(f"unknown policy {name!r} (choose from {', '.join(POLICY_NAMES)})")
+        if "learned" in args.policies and (reason := learned_unavailable_reason()) is not None:
+            raise UsageError(f"policy 'learned' is not available: {reason}")
+    switches = []
+    for item in args.ablation:
+        name, _, value = item.partition("=")
+        if name not in BOOL_SWITCHES:
+            raise UsageError(f"--ablation {item!r}: unknown switch {name!r} (choose from {', '.join(BOOL_SWITCHES)})")
+        if value.lower() not in SWITCH_VALUES:
+            raise UsageError(f"--ablation {item!r}: value must be true, false or both")
+        switches.append((name, SWITCH_VALUES[value.lower()]))
+    if args.seeds is not None and not 0 <= args.seeds[0] <= args.seeds[1]:
+        raise UsageError(f"--seeds FIRST LAST needs 0 <= FIRST <= LAST, got {args.seeds[0]} {args.seeds[1]}")
+    minimums = (("--steps", args.steps, MIN_STEPS), ("--camera-size", args.camera_size, MIN_CAMERA_PX),
+                ("--jobs", args.jobs, MIN_JOBS))
+    for flag, value, low in minimums:
+        if value is not None and value < low:
+            raise UsageError(f"{flag} must be >= {low}, got {value}")
+    if args.tables is not None:
+        if args.suite is None:
+            raise UsageError("--tables needs --suite")
+        names = [g.name for g in SUITES[args.suite]]
+        if unknown := [t for t in args.tables if t not in names]:
+            raise UsageError(f"suite {args.suite} has no group {unknown[0]!r} (choose from {', '.join(names)})")
+    return Selection(_tuple(args.scenes), _tuple(args.policies), _tuple(args.perceptions), _tuple(args.pose_sources),
+                     tuple(switches), _tuple(args.tables), None if args.seeds is None else tuple(args.seeds),
+                     args.steps, args.camera_size)
+
+
+def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:
+    return None if values is None else tuple(dict.fromkeys(values))
+
+
+def validate_runs(specs: Sequence[RunSpec]) -> None:
+    """Build every distinct env configuration (and the stack's configuration) without running it."""
+    from trade_gym.perception.trade_stack import pipeline_config
+
+    if not specs:
+        raise UsageError("the selection matches no run")
+    seen = set()
+    for spec in specs:
+        kwargs = spec.env_kwargs()
+        key = tuple(sorted(kwargs.items()))
+        if key in seen:
+            continue
+        seen.add(key)
+        try:
+            config = EnvConfig(**kwargs)
+            if config.perception != "oracle":
+                pipeline_config(config)
+        except (TypeError, ValueError) as exc:
+            raise UsageError(f"run {spec.config_id}: the env rejects its configuration: {exc}") from None
+
+
+def _check_paths(args: argparse.Namespace, selection: Selection) -> None:
+    if args.out is None:
+        raise UsageError("--out DIR is required")
+    if not args.out.parent.is_dir():
+        raise UsageError(f"--out {args.out}: parent folder {args.out.parent} does not exist")
+    if args.out.exists() and not args.out.is_dir():
+        raise UsageError(f"--out {args.out} exists and is not a folder")
+    if args.write_reference is not None:
+        if args.suite != "quick" or selection != Selection():
+            raise UsageError("--write-reference needs --suite quick without filters or overrides")
+        if not args.write_reference.parent.is_dir():
+            raise UsageError(f"--write-reference {args.write_reference}: parent folder does not exist")
+    if args.check_reference is not None and not args.check_reference.is_file():
+        raise UsageError(f"--check-reference {args.check_reference}: no such file")
+
+
+def _progress(start: float) -> Callable[[int, int, RunResult], None]:
+    tty = sys.stderr.isatty()
+
+    def show(done: int, total: int, result: RunResult) -> None:
+        elapsed = time.perf_counter() - start
+        eta = elapsed / done * (total - done)
+        status = "FAILED" if result.error else f"{result.metrics['steps']} steps"
+        line = (f"[{done:>{len(str(total))}}/{total}] {100 * done // total:3d}% {elapsed:6.1f} s, eta {eta:5.0f} s  "
+                f"{result.spec.run_id} ({status})")
+        sys.stderr.write(("\r\033[K" if tty else "") + line + ("" if tty and done < total else "\n"))
+        sys.stderr.flush()
+    return show
+
+
+def write_outputs(args: argparse.Namespace, results: list[RunResult], argv: Sequence[str], jobs: int,
+                  wall_s: float) -> dict:
+    """results.json, results.md, the plots and the optional video; returns the JSON document."""
+    out: Path = args.out
+    summary = summarise(results)
+    written = []
+    for group in dict.fromkeys(r.spec.group for r in results):
+        runs = [r for r in results if r.spec.group == group]
+        written += plots.plot_group(runs, group, runs[0].spec.depth_kind, out)
+    video = None
+    first_ok = next((r for r in results if r.error is None), None)
+    if args.video and first_ok is not None:
+        from trade_gym.bench.video import record_video
+
+        video = record_video(first_ok.spec, out / "video").name
+    meta = collect_meta(args.suite, argv, jobs, len(results), wall_s)
+    names = [p.name for p in written]
+    document = build_document(results, summary, meta, names, video)
+    titles = {g.name: g.title for g in SUITES.get(args.suite or "", ())}
+    failures = [f"{r.spec.run_id}: {r.error}" for r in results if r.error]
+    (out / "results.md").write_text(report.render_markdown(summary, meta, titles, failures, names))
+    write_json(out / "results.json", document)
+    _validate_schema(to_json_safe(document))
+    return document
+
+
+def _validate_schema(document: dict) -> None:
+    try:
+        import jsonschema  # test extra; results are still written without it
+    except ImportError:
+        return
+    jsonschema.validate(document, load_schema())
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = build_parser().parse_args(argv)
+        selection = _selection(args)
+        specs = expand_suite(args.suite, selection, available_policies())
+        validate_runs(specs)
+        if args.list:
+            print("\n".join(s.run_id + f" ({s.steps} steps, {s.camera_size} px)" for s in specs))
+            return 0
+        _check_paths(args, selection)
+    except UsageError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    jobs = args.jobs or SUITE_JOBS.get(args.suite or "", DEFAULT_CUSTOM_JOBS)
+    args.out.mkdir(exist_ok=True)
+    start = time.perf_counter()
+    results = run_all(specs, jobs, _progress(start))
+    wall_s = time.perf_counter() - start
+    write_outputs(args, results, argv, jobs, wall_s)
+    status = 0
+    if failed := [r for r in results if r.error]:
+        print(f"{PROG}: {len(failed)} of {len(results)} runs failed (see results.md)", file=sys.stderr)
+        status = EXIT_FAILED
+    if args.write_reference is not None and not failed:
+        reference.write_reference(results, args.write_reference)
+        print(f"wrote reference {args.write_reference}", file=sys.stderr)
+    elif args.write_reference is not None:
+        print(f"{PROG}: reference not written: some runs failed", file=sys.stderr)
+    if args.check_reference is not None:
+        problems, compared = reference.check_against_reference(results, reference.load_reference(args.check_reference))
+        print(f"reference check: {compared} runs compared, {len(problems)} regressions", file=sys.stderr)
+        for line in problems:
+            print(f"  {line}", file=sys.stderr)
+        status = status or (EXIT_FAILED if problems else 0)
+    print(f"{len(results)} runs in {wall_s:.1f} s -> {args.out / 'results.md'}")
+    return status
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

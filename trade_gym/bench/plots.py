@@ -1,0 +1,114 @@
+"""Benchmark figures (matplotlib, Agg): per-frame IoU and per-frame depth error averaged over runs
+(the paper's Figures 7 and 6), and a top view of the target's and the drone's paths, per group.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (after choosing the headless backend)
+import numpy as np  # noqa: E402
+import numpy.typing as npt  # noqa: E402
+
+from trade_gym.bench.runner import RunResult  # noqa: E402
+from trade_gym.bench.summary import config_label, spec_record  # noqa: E402
+from trade_gym.config import CAMERA_RATE_HZ  # noqa: E402
+
+PANEL_SIZE_IN = (8.5, 3.2)  # one scene per panel, legend on the right [inch]
+DPI = 110
+LEGEND_FONT_SIZE = 7
+
+
+def nanmean_ragged(series: Sequence[npt.ArrayLike]) -> npt.NDArray[np.float64]:
+    """Per-frame mean over runs of different lengths, ignoring NaN: (max T,) with NaN where no run has
+    a value."""
+    length = max((len(s) for s in series), default=0)
+    stack = np.full((len(series), length), np.nan)
+    for row, s in zip(stack, series):
+        row[: len(s)] = s
+    counts = np.sum(np.isfinite(stack), axis=0)
+    sums = np.nansum(stack, axis=0)
+    return np.divide(sums, counts, out=np.full(length, np.nan), where=counts > 0)
+
+
+def _by_scene_and_config(results: Sequence[RunResult]) -> dict[str, dict[str, list[RunResult]]]:
+    out: dict[str, dict[str, list[RunResult]]] = {}
+    for r in results:
+        if r.series is not None:
+            out.setdefault(r.spec.scene, {}).setdefault(config_label(spec_record(r.spec)), []).append(r)
+    return out
+
+
+def _panels(n: int) -> tuple[plt.Figure, np.ndarray]:
+    fig, axes = plt.subplots(n, 1, figsize=(PANEL_SIZE_IN[0], PANEL_SIZE_IN[1] * n), squeeze=False)
+    return fig, axes[:, 0]
+
+
+def _legend_right(ax: plt.Axes) -> None:
+    ax.legend(fontsize=LEGEND_FONT_SIZE, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+
+
+def _save(fig: plt.Figure, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")  # keeps the legends outside the axes
+    plt.close(fig)
+    return path
+
+
+def plot_per_frame(results: Sequence[RunResult], quantity: str, ylabel: str, title: str, path: Path) -> Path | None:
+    """Per-frame mean over runs of `RunSeries.<quantity>` (absolute value), one line per configuration,
+    one panel per scene; None when no run has a finite value."""
+    grouped = _by_scene_and_config(results)
+    curves = {scene: {label: nanmean_ragged([np.abs(getattr(r.series, quantity)) for r in runs])
+                      for label, runs in configs.items()} for scene, configs in grouped.items()}
+    if not any(np.isfinite(c).any() for configs in curves.values() for c in configs.values()):
+        return None
+    fig, axes = _panels(len(curves))
+    for ax, (scene, configs) in zip(axes, curves.items()):
+        for label, curve in configs.items():
+            n_runs = len(grouped[scene][label])
+            ax.plot(np.arange(len(curve)) / CAMERA_RATE_HZ, curve, label=f"{label} (n={n_runs})", lw=1.0)
+        ax.set(title=f"{title}: {scene}", xlabel="time [s]", ylabel=ylabel)
+        ax.grid(alpha=0.3)
+        _legend_right(ax)
+    return _save(fig, path)
+
+
+def plot_paths(results: Sequence[RunResult], title: str, path: Path) -> Path | None:
+    """Top view (world x east, y north [m]): the target's path and, per configuration, the drone's path
+    of its first run (starts circled), one panel per scene."""
+    grouped = _by_scene_and_config(results)
+    if not grouped:
+        return None
+    fig, axes = _panels(len(grouped))
+    for ax, (scene, configs) in zip(axes, grouped.items()):
+        first_runs = [runs[0] for runs in configs.values()]
+        target = max(first_runs, key=lambda r: len(r.series.target_xy_m)).series.target_xy_m
+        ax.plot(target[:, 0], target[:, 1], "k-", lw=2.0, label="target")
+        for label, run in zip(configs, first_runs):
+            xy = run.series.drone_xy_m
+            line, = ax.plot(xy[:, 0], xy[:, 1], lw=1.0, label=f"drone: {label} (seed {run.spec.seed})")
+            if len(xy):
+                ax.plot(*xy[0], "o", color=line.get_color(), mfc="none")  # start (hover stays there)
+        if len(target):
+            ax.plot(*target[0], "ko")
+        ax.set(title=f"{title}: {scene}", xlabel="x east [m]", ylabel="y north [m]", aspect="equal")
+        ax.grid(alpha=0.3)
+        _legend_right(ax)
+    return _save(fig, path)
+
+
+def plot_group(results: Sequence[RunResult], group: str, depth_kind: str, out: Path) -> list[Path]:
+    """All figures of one group, written into `out`; returns the files written."""
+    depth = f"{depth_kind}_depth_error_m"
+    written = [
+        plot_per_frame(results, "iou", "IoU (mean over runs)", f"{group} IoU per frame", out / f"{group}_iou.png"),
+        plot_per_frame(results, depth, f"|{depth_kind} depth error| [m]", f"{group} {depth_kind} depth error",
+                       out / f"{group}_{depth_kind}_depth_error.png"),
+        plot_paths(results, f"{group} paths", out / f"{group}_paths.png"),
+    ]
+    return [p for p in written if p is not None]

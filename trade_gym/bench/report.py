@@ -1,0 +1,140 @@
+"""results.md: the benchmark's tables for a person to read: one generic table per group plus the
+paper-shaped pivot of its kind (Table 1, Table 2, the tracking comparison, the follower comparison).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from trade_gym.bench.summary import config_label
+
+Record = dict[str, Any]
+MISSING = "–"
+
+
+def fmt(value: float | None, digits: int = 3) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return MISSING
+    return f"{value:.{digits}g}" if abs(value) >= 10 ** digits else f"{value:.{digits}f}".rstrip("0").rstrip(".")
+
+
+def mean_pm(stats: dict[str, float], digits: int = 3) -> str:
+    """'mean ± std' (std omitted for a single run)."""
+    if not stats["n"]:
+        return MISSING
+    std = stats["std"]
+    return fmt(stats["mean"], digits) + (f" ± {fmt(std, digits)}" if math.isfinite(std) else "")
+
+
+def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + ["| " + " | ".join(r) + " |" for r in rows]
+
+
+def generic_table(records: Sequence[Record]) -> list[str]:
+    header = ["scene", "configuration", "runs", "steps", "visible", "tracked", "AUC", "P@20px", "lost max [s]",
+              "switches", "ground RMSE [m]", "target RMSE [m]", "horiz. error [m]", "crashes"]
+    rows = []
+    for r in records:
+        m = r["metrics"]
+        rows.append([r["scene"], config_label(r), f"{r['n_runs'] - r['n_failed']}/{r['n_runs']}",
+                     mean_pm(m["steps"], 4), mean_pm(m["visible_fraction"]), mean_pm(m["tracked_fraction"]),
+                     mean_pm(m["success_auc"]), mean_pm(m["precision_20px"]), fmt(m["longest_lost_streak_s"]["max"]),
+                     str(r["decoy_switches_total"]), fmt(r["pooled_ground_depth_rmse_m"]),
+                     fmt(r["pooled_target_depth_rmse_m"]), mean_pm(m["mean_horizontal_error_m"]), str(r["crashes"])])
+    return table(header, rows)
+
+
+def _scenes(records: Sequence[Record]) -> list[str]:
+    return list(dict.fromkeys(r["scene"] for r in records))
+
+
+def _find(records: Sequence[Record], **match: Any) -> Record | None:
+    return next((r for r in records if all(r.get(k) == v or r["switches"].get(k) == v for k, v in match.items())),
+                None)
+
+
+def table1_pivot(records: Sequence[Record]) -> list[str]:
+    """Pooled ground-depth RMSE [m]: rows temporal fusion x ground mask, cells 'gt (vio)' per scene."""
+    scenes = _scenes(records)
+    rows = []
+    for tf in (False, True):
+        for gm in (False, True):
+            cells = []
+            for scene in scenes:
+                gt, vio = (_find(records, scene=scene, pose_source=p, temporal_fusion=tf, ground_mask=gm)
+                           for p in ("gt", "vio"))
+                cell = fmt(gt["pooled_ground_depth_rmse_m"]) if gt else MISSING
+                cells.append(cell + (f" ({fmt(vio['pooled_ground_depth_rmse_m'])})" if vio else ""))
+            rows.append(["✓" if tf else "✗", "✓" if gm else "✗"] + cells)
+    return table(["temporal fusion", "ground mask"] + scenes, rows)
+
+
+def table2_pivot(records: Sequence[Record]) -> list[str]:
+    """Pooled target-depth RMSE [m] of single-image depth, RANSAC off/on per scene."""
+    scenes = _scenes(records)
+    rows = []
+    for ransac in (False, True):
+        cells = [_find(records, scene=s, depth_only_ransac=ransac) for s in scenes]
+        rmses = [fmt(c["pooled_target_depth_rmse_m"]) if c else MISSING for c in cells]
+        rows.append(["✓" if ransac else "✗"] + rmses)
+    return table(["RANSAC"] + scenes, rows)
+
+
+def tracking_pivot(records: Sequence[Record]) -> list[str]:
+    """Per scene and perception: decoy switches (total), tracked fraction and success AUC (mean ± std)."""
+    columns = list(dict.fromkeys((r["perception"], r["pose_source"]) for r in records))
+    header = ["scene"] + [f"{p} ({pose}) {what}" for p, pose in columns for what in ("switches", "tracked", "AUC")]
+    rows = []
+    for scene in _scenes(records):
+        row = [scene]
+        for perception, pose in columns:
+            r = _find(records, scene=scene, perception=perception, pose_source=pose)
+            row += [str(r["decoy_switches_total"]), mean_pm(r["metrics"]["tracked_fraction"]),
+                    mean_pm(r["metrics"]["success_auc"])] if r else [MISSING] * 3
+        rows.append(row)
+    return table(header, rows)
+
+
+def follow_pivot(records: Sequence[Record]) -> list[str]:
+    """Per follower (and perception): visible fraction and horizontal following error per scene."""
+    scenes = _scenes(records)
+    configs = list(dict.fromkeys((r["policy"], r["perception"]) for r in records))
+    rows = []
+    for policy, perception in configs:
+        row = [f"{policy} ({perception})"]
+        for scene in scenes:
+            r = _find(records, scene=scene, policy=policy, perception=perception)
+            m = r["metrics"] if r else None
+            row.append(f"{mean_pm(m['visible_fraction'])} / {mean_pm(m['mean_horizontal_error_m'], 2)}"
+                       if m else MISSING)
+        rows.append(row)
+    return table(["follower"] + [f"{s}: visible / error [m]" for s in scenes], rows)
+
+
+PIVOTS = {"table1": table1_pivot, "table2": table2_pivot, "tracking": tracking_pivot, "follow": follow_pivot}
+
+
+def render_markdown(summary: Sequence[Record], meta: Record, titles: dict[str, str], failures: Sequence[str],
+                    plots: Sequence[str]) -> str:
+    """The whole results.md."""
+    lines = [f"# trade-bench results{' — suite ' + meta['suite'] if meta.get('suite') else ''}", "",
+             f"commit `{meta['commit']}`, {meta['date_utc']}, {meta['cpu']} ({meta['cores']} cores), "
+             f"renderer {meta['renderer']}, {meta['runs']} runs in {meta['wall_s']:.0f} s with {meta['jobs']} jobs.",
+             "", "Means ± sample std over seeds; depth RMSE pooled over all frames of all runs; "
+             "tracking scores over frames with the target visible; `–` = undefined (no such frame).", ""]
+    for group in dict.fromkeys(r["group"] for r in summary):
+        records = [r for r in summary if r["group"] == group]
+        lines += [f"## {titles.get(group, group)}", ""]
+        pivot = PIVOTS.get(records[0]["kind"])
+        if pivot is None:
+            lines += generic_table(records) + [""]
+        else:
+            lines += pivot(records) + ["", "<details><summary>all configurations</summary>", ""]
+            lines += generic_table(records) + ["", "</details>", ""]
+    if failures:
+        lines += ["## Failed runs", ""] + [f"- {f}" for f in failures] + [""]
+    if plots:
+        lines += ["## Plots", ""] + [f"![{p}]({p})" for p in plots] + [""]
+    return "\n".join(lines)

@@ -1,0 +1,132 @@
+"""results.json: per-run metrics and timing, the per-configuration summary and the run's meta
+(commit, date, CPU, package versions, renderer), with NaN written as null; its JSON schema ships here.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import json
+import math
+import os
+import platform
+import subprocess
+from collections.abc import Sequence
+from dataclasses import asdict
+from datetime import datetime, timezone
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from trade_gym.bench.runner import RunResult
+from trade_gym.bench.summary import spec_record
+
+SCHEMA_VERSION = 1
+SCHEMA_FILE = "results.schema.json"
+PACKAGES = ("numpy", "pybullet", "gymnasium", "opencv-python-headless", "onnxruntime", "stable-baselines3",
+            "filterpy", "matplotlib", "trade-gym")
+RENDERER = "TinyRenderer"  # pybullet DIRECT mode's software renderer (the env's default)
+GIT_TIMEOUT_S = 5.0
+
+
+def git_commit(cwd: Path | None = None) -> str:
+    """Short hash of HEAD (with '+dirty' when the tree has changes); 'unknown' outside a repository."""
+    def git(*args: str) -> str:
+        return subprocess.run(["git", *args], capture_output=True, text=True, check=True, cwd=cwd,
+                              timeout=GIT_TIMEOUT_S).stdout.strip()
+
+    try:
+        commit = git("rev-parse", "--short", "HEAD")
+        return commit + ("+dirty" if git("status", "--porcelain", "--untracked-files=no") else "")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def package_versions() -> dict[str, str]:
+    versions = {}
+    for name in PACKAGES:
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def collect_meta(suite: str | None, argv: Sequence[str], jobs: int, n_runs: int, wall_s: float) -> dict[str, Any]:
+    """Where and when the numbers were measured (the repository is found from this file's location)."""
+    return {
+        "suite": suite,
+        "argv": list(argv),
+        "commit": git_commit(Path(__file__).resolve().parent),
+        "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "cpu": cpu_model(),
+        "cores": os.cpu_count() or 0,
+        "load_average_1min": round(os.getloadavg()[0], 2),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "packages": package_versions(),
+        "renderer": RENDERER,
+        "jobs": jobs,
+        "runs": n_runs,
+        "wall_s": wall_s,
+    }
+
+
+def run_record(result: RunResult) -> dict[str, Any]:
+    s = result.spec
+    return spec_record(s) | {"run_id": s.run_id, "seed": s.seed, "steps_requested": s.steps,
+                             "camera_size": s.camera_size, "env_kwargs": s.env_kwargs(),
+                             "metrics": dict(result.metrics), "timing": asdict(result.timing), "error": result.error}
+
+
+def build_document(results: Sequence[RunResult], summary: list[dict[str, Any]], meta: dict[str, Any],
+                   plots: Sequence[str], video: str | None) -> dict[str, Any]:
+    """The results.json document. `runs[*].metrics` and `summary` are deterministic; timing lives only
+    in `runs[*].timing`, `meta` and `timing`."""
+    ok = [r for r in results if r.error is None]
+    steps = sum(int(r.metrics["steps"]) for r in ok)
+    loop_s = sum(r.timing.step_loop_s for r in ok)
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "meta": meta,
+        "runs": [run_record(r) for r in results],
+        "summary": summary,
+        "timing": {"total_steps": steps, "step_loop_s": loop_s,
+                   "mean_steps_per_s": steps / loop_s if loop_s > 0 else math.nan},
+        "files": {"plots": list(plots), "video": video},
+    }
+
+
+def to_json_safe(value: Any) -> Any:
+    """Recursively replace non-finite floats by None (JSON has no NaN) and tuples by lists."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {str(k): to_json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [to_json_safe(v) for v in value]
+    return value
+
+
+def write_json(path: Path, document: dict[str, Any]) -> None:
+    path.write_text(json.dumps(to_json_safe(document), indent=1, allow_nan=False) + "\n")
+
+
+def load_schema() -> dict[str, Any]:
+    """The JSON schema of results.json (package data)."""
+    return json.loads(resources.files("trade_gym.bench").joinpath(SCHEMA_FILE).read_text())
+
+
+def deterministic_part(document: dict[str, Any]) -> dict[str, Any]:
+    """What two runs of the same command must agree on: per-run metrics and errors, and the summary."""
+    return {"runs": [{k: r[k] for k in ("run_id", "metrics", "error")} for r in document["runs"]],
+            "summary": document["summary"]}

@@ -1,0 +1,168 @@
+"""Runs benchmark episodes, serially or in worker processes, and scores each one.
+
+A run's scores (`metrics`) depend only on its spec, so serial and parallel runs agree exactly;
+wall-clock figures are kept apart in `timing`.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import sys
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+
+def import_pybullet_quietly() -> None:
+    """Import pybullet with file descriptor 2 pointed at /dev/null: its C import prints a build-time
+    banner on stderr, which would break the CLI's one-line errors and its progress line."""
+    if "pybullet" in sys.modules:
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 2)
+            import pybullet  # noqa: F401
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+import_pybullet_quietly()
+
+from trade_gym import metrics  # noqa: E402  (after the quiet pybullet import)
+from trade_gym.bench.policies import make_policy  # noqa: E402
+from trade_gym.bench.suites import RunSpec  # noqa: E402
+from trade_gym.env import TradeFollowEnv  # noqa: E402
+
+FloatArray = npt.NDArray[np.float64]
+# Worker processes start fresh ("spawn"): no pybullet client or thread pool is inherited.
+WORKER_START_METHOD = "spawn"
+# Relative cost of a step that renders and runs the stack against an oracle step (measured ~30-60x);
+# used only to submit the longest runs first, which shortens the parallel makespan.
+RENDERING_STEP_COST = 40.0
+
+
+@dataclass(frozen=True)
+class RunSeries:
+    """Per-frame records of one run for the plots: (T,) arrays and (T, 2) world xy paths [m]."""
+
+    iou: FloatArray
+    ground_depth_error_m: FloatArray  # estimate - truth, NaN where either is missing
+    target_depth_error_m: FloatArray
+    drone_xy_m: FloatArray
+    target_xy_m: FloatArray
+
+
+@dataclass(frozen=True)
+class RunTiming:
+    """Wall-clock figures [s] (machine- and load-dependent; never compared between runs)."""
+
+    wall_s: float  # env construction, reset, episode and close
+    reset_s: float
+    step_loop_s: float  # policy + env.step over the episode
+    steps_per_s: float  # env steps per second of the step loop
+
+
+@dataclass(frozen=True)
+class RunResult:
+    spec: RunSpec
+    metrics: dict[str, float | int | bool]  # `trade_gym.metrics.episode_metrics`; empty on error
+    timing: RunTiming
+    series: RunSeries | None
+    error: str | None = None  # one line: the exception that ended the run
+
+
+def _series(infos: list[dict]) -> RunSeries:
+    def xy(key: str) -> FloatArray:
+        return np.array([i[key][:2] for i in infos], dtype=np.float64).reshape(-1, 2)
+
+    return RunSeries(
+        iou=np.array([i["iou"] for i in infos], dtype=np.float64),
+        ground_depth_error_m=metrics.depth_errors_m(infos, "ground"),
+        target_depth_error_m=metrics.depth_errors_m(infos, "target"),
+        drone_xy_m=xy("drone_position_m"),
+        target_xy_m=xy("target_position_m"),
+    )
+
+
+def fly(spec: RunSpec, on_frame: Callable[[TradeFollowEnv], None] | None = None,
+        render: bool = False) -> tuple[list[dict], RunTiming]:
+    """Fly one episode of `spec`; `on_frame(env)` after reset and every step (e.g. to record video)."""
+    start = time.perf_counter()
+    kwargs = spec.env_kwargs() | ({"render_mode": "rgb_array"} if render else {})
+    env = TradeFollowEnv(**kwargs)
+    infos: list[dict] = []
+    try:
+        policy = make_policy(spec.policy, spec.seed, env.config.camera_pitch_deg)
+        reset_start = time.perf_counter()
+        obs, _ = env.reset(seed=spec.seed)
+        loop_start = time.perf_counter()
+        if on_frame is not None:
+            on_frame(env)
+        first, done = True, False
+        while not done and len(infos) < spec.steps:
+            action, _ = policy.predict(obs, episode_start=np.array([first]))
+            first = False
+            obs, _, terminated, truncated, info = env.step(action)
+            infos.append(info)
+            done = terminated or truncated
+            if on_frame is not None:
+                on_frame(env)
+        loop_s = time.perf_counter() - loop_start
+    finally:
+        env.close()
+    timing = RunTiming(time.perf_counter() - start, loop_start - reset_start, loop_s,
+                       metrics.steps_per_second(len(infos), loop_s))
+    return infos, timing
+
+
+def run_spec(spec: RunSpec) -> RunResult:
+    """Fly and score one run; an exception is recorded in `error` rather than raised."""
+    start = time.perf_counter()
+    try:
+        infos, timing = fly(spec)
+    except Exception as exc:  # noqa: BLE001 - one failed run must not end a long benchmark
+        last = traceback.extract_tb(exc.__traceback__)[-1]
+        wall = time.perf_counter() - start
+        return RunResult(spec, {}, RunTiming(wall, float("nan"), float("nan"), float("nan")), None,
+                         f"{type(exc).__name__}: {exc} ({last.filename}:{last.lineno})")
+    return RunResult(spec, metrics.episode_metrics(infos), timing, _series(infos))
+
+
+def estimated_cost(spec: RunSpec) -> float:
+    """Rough cost of a run in oracle-step units (steps x per-step cost)."""
+    return spec.steps * (1.0 if spec.perception == "oracle" else RENDERING_STEP_COST)
+
+
+def run_all(specs: Sequence[RunSpec], jobs: int = 1,
+            on_done: Callable[[int, int, RunResult], None] | None = None) -> list[RunResult]:
+    """Results of `specs` in their order; `jobs` > 1 runs them in that many worker processes.
+    `on_done(n_done, n_total, result)` is called as each run finishes (in completion order)."""
+    if jobs < 1:
+        raise ValueError(f"jobs must be >= 1, got {jobs!r}")
+    results: list[RunResult | None] = [None] * len(specs)
+
+    def finish(index: int, result: RunResult) -> None:
+        results[index] = result
+        if on_done is not None:
+            on_done(sum(r is not None for r in results), len(specs), result)
+
+    if jobs == 1 or len(specs) <= 1:
+        for index, spec in enumerate(specs):
+            finish(index, run_spec(spec))
+        return results  # type: ignore[return-value]
+    context = multiprocessing.get_context(WORKER_START_METHOD)
+    with ProcessPoolExecutor(max_workers=min(jobs, len(specs)), mp_context=context) as pool:
+        order = sorted(range(len(specs)), key=lambda i: -estimated_cost(specs[i]))
+        futures = {pool.submit(run_spec, specs[index]): index for index in order}
+        for future in as_completed(futures):
+            finish(futures[future], future.result())
+    return results  # type: ignore[return-value]

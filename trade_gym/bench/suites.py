@@ -1,0 +1,195 @@
+"""Benchmark suites as data: groups of runs (one group per table), expanded into run specs.
+
+A `GroupSpec` is a grid (scenes x policies x perceptions x pose sources x ablation switches x seeds);
+a `Selection` (from the command line) filters the categorical axes and overrides seeds, steps, camera size.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, fields
+from typing import Any
+
+from trade_gym.config import CAMERA_RATE_HZ, SCENE_NAMES, EnvConfig
+
+Kwargs = tuple[tuple[str, Any], ...]  # sorted (name, value) pairs: hashable env keyword arguments
+# Which table a group renders in results.md (and how its runs are compared).
+GROUP_KINDS = ("follow", "tracking", "table1", "table2", "custom")
+BOOL_SWITCHES = tuple(f.name for f in fields(EnvConfig) if f.type == "bool")
+# The paper's protocol: one sequence per scene (a fixed world), each run of it with its first tracked
+# frame shifted within 10 frames and its initial box perturbed within 5 px (and its own sensor noise).
+PAPER_SEQUENCE_WORLD_SEED = 0
+PAPER_PROTOCOL: Kwargs = (("init_box_perturb_px", 5.0), ("init_frame_shift_max", 10),
+                          ("world_seed", PAPER_SEQUENCE_WORLD_SEED))
+DEPTH_RUNS, TRACKING_RUNS = (0, 4), (0, 9)  # seeds (inclusive): 5 runs for depth, 10 for tracking
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One episode: which group it belongs to and every env keyword argument it needs."""
+
+    group: str
+    kind: str
+    scene: str
+    policy: str
+    perception: str
+    pose_source: str
+    seed: int
+    steps: int  # episode length [frames]; the env truncates there
+    camera_size: int  # [px]
+    switches: Kwargs = ()  # the group's ablation axes, e.g. (("ground_mask", True),)
+    extra: Kwargs = ()  # kwargs fixed across the group (protocol, depth mode)
+    depth_kind: str = "ground"  # which depth the group's tables and plots score
+
+    @property
+    def config_id(self) -> str:
+        """Identifies the configuration (everything but the seed)."""
+        parts = [self.group, self.scene, self.policy, self.perception, self.pose_source]
+        if self.switches:
+            parts.append(",".join(f"{k}={int(v)}" for k, v in self.switches))
+        return "/".join(parts)
+
+    @property
+    def run_id(self) -> str:
+        return f"{self.config_id}/seed{self.seed}"
+
+    def env_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of `TradeFollowEnv` for this run; truncation at exactly `steps` frames."""
+        return {
+            "scene": self.scene,
+            "perception": self.perception,
+            "pose_source": self.pose_source,
+            "camera_size": self.camera_size,
+            "episode_duration_s": self.steps / CAMERA_RATE_HZ,
+            **dict(self.extra),
+            **dict(self.switches),
+        }
+
+    def switch_value(self, name: str) -> Any:
+        """The value this run gives an env keyword (its switches, then extras, then the env default)."""
+        return dict(self.switches).get(name, dict(self.extra).get(name, getattr(EnvConfig(), name)))
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Command-line choices. Categorical axes filter a suite (None = keep all); seeds (first, last
+    inclusive), steps and camera size override it."""
+
+    scenes: tuple[str, ...] | None = None
+    policies: tuple[str, ...] | None = None
+    perceptions: tuple[str, ...] | None = None
+    pose_sources: tuple[str, ...] | None = None
+    switches: tuple[tuple[str, tuple[bool, ...]], ...] = ()  # name -> allowed values
+    groups: tuple[str, ...] | None = None
+    seeds: tuple[int, int] | None = None
+    steps: int | None = None
+    camera_size: int | None = None
+
+
+@dataclass(frozen=True)
+class GroupSpec:
+    """A grid of runs rendered as one table."""
+
+    name: str
+    kind: str
+    title: str
+    scenes: tuple[str, ...]
+    policies: tuple[str, ...]
+    perceptions: tuple[str, ...]
+    pose_sources: tuple[str, ...]
+    seeds: tuple[int, int]  # first, last (inclusive)
+    steps: int
+    camera_size: int
+    switch_grid: tuple[tuple[str, tuple[bool, ...]], ...] = ()
+    extra: Kwargs = ()
+    depth_kind: str = "ground"
+
+    def __post_init__(self) -> None:
+        if self.kind not in GROUP_KINDS:
+            raise ValueError(f"GroupSpec.kind must be one of {GROUP_KINDS}, got {self.kind!r}")
+        if self.seeds[0] > self.seeds[1]:
+            raise ValueError(f"GroupSpec.seeds must be (first, last) with first <= last, got {self.seeds!r}")
+
+    def expand(self, selection: Selection, available_policies: tuple[str, ...]) -> list[RunSpec]:
+        """Runs of this group kept by `selection`; policies not available here are dropped."""
+        def keep(values: tuple[str, ...], chosen: tuple[str, ...] | None) -> tuple[str, ...]:
+            return tuple(v for v in values if chosen is None or v in chosen)
+
+        first, last = selection.seeds or self.seeds
+        names = [n for n, _ in self.switch_grid]
+        runs = []
+        for scene, policy, perception, pose, values, seed in itertools.product(
+                keep(self.scenes, selection.scenes), keep(self.policies, selection.policies),
+                keep(self.perceptions, selection.perceptions), keep(self.pose_sources, selection.pose_sources),
+                itertools.product(*(v for _, v in self.switch_grid)), range(first, last + 1)):
+            if policy not in available_policies:
+                continue
+            run = RunSpec(self.name, self.kind, scene, policy, perception, pose, seed,
+                          selection.steps or self.steps, selection.camera_size or self.camera_size,
+                          tuple(zip(names, values)), self.extra, self.depth_kind)
+            if all(run.switch_value(n) in allowed for n, allowed in selection.switches):
+                runs.append(run)
+        return runs
+
+
+ALL_SCENES = SCENE_NAMES
+ON_OFF = (False, True)
+
+QUICK = (
+    GroupSpec("follow", "follow", "Followers on oracle perception (hover and random are floors)",
+              ALL_SCENES, ("scripted", "learned", "hover", "random"), ("oracle",), ("gt",), (0, 0), 300, 128),
+    GroupSpec("tracking", "tracking", "TRADE against its DCF baseline (scripted follower)",
+              ALL_SCENES, ("scripted",), ("trade", "dcf"), ("gt",), (0, 0), 150, 128),
+)
+
+
+def _paper_groups(steps: int, camera_size: int) -> tuple[GroupSpec, ...]:
+    return (
+        GroupSpec("table1", "table1", "Table 1: ground-depth RMSE [m], temporal fusion x ground mask, gt (vio) pose",
+                  ALL_SCENES, ("scripted",), ("trade",), ("gt", "vio"), DEPTH_RUNS, steps, camera_size,
+                  (("temporal_fusion", ON_OFF), ("ground_mask", ON_OFF)), PAPER_PROTOCOL, "ground"),
+        # Table 2 needs the depth-only single-image mode (`single_image_depth=True`, RANSAC on/off).
+        GroupSpec("table2", "table2", "Table 2: target-depth RMSE [m] from single-image depth, RANSAC off/on",
+                  ALL_SCENES, ("scripted",), ("trade",), ("gt",), DEPTH_RUNS, steps, camera_size,
+                  (("depth_only_ransac", ON_OFF),), PAPER_PROTOCOL + (("single_image_depth", True),), "target"),
+        GroupSpec("tracking", "tracking", "Tracking: TRADE against DCF (no trajectory guidance), vio pose",
+                  ALL_SCENES, ("scripted",), ("trade", "dcf"), ("vio",), TRACKING_RUNS, steps, camera_size,
+                  (), PAPER_PROTOCOL, "ground"),
+    )
+
+
+PAPER_STEPS, FULL_STEPS = 450, 900  # 15 s sequences (about an hour on 2 cores); the env's full 30 s
+PAPER_CAMERA_PX = 256
+
+SUITES: dict[str, tuple[GroupSpec, ...]] = {
+    "quick": QUICK,
+    "paper": _paper_groups(PAPER_STEPS, PAPER_CAMERA_PX),
+    "full": _paper_groups(FULL_STEPS, PAPER_CAMERA_PX) + (
+        GroupSpec("policies", "follow", "Followers on oracle and TRADE perception",
+                  ALL_SCENES, ("scripted", "learned", "hover", "random"), ("oracle", "trade"), ("gt",),
+                  TRACKING_RUNS, FULL_STEPS, PAPER_CAMERA_PX),
+    ),
+}
+SUITE_JOBS = {"quick": 2, "paper": 2, "full": 2}  # default --jobs per suite
+
+# A run without --suite: one grid of the chosen axes, these defaults where nothing was chosen.
+CUSTOM_DEFAULTS = GroupSpec("custom", "custom", "Custom grid", ALL_SCENES, ("scripted",), ("oracle",), ("gt",),
+                            (0, 0), 300, 128)
+
+
+def custom_group(selection: Selection) -> GroupSpec:
+    """The grid of a run without --suite: the selection's axes (and switch values) as the group."""
+    d = CUSTOM_DEFAULTS
+    return GroupSpec(d.name, d.kind, d.title, selection.scenes or d.scenes, selection.policies or d.policies,
+                     selection.perceptions or d.perceptions, selection.pose_sources or d.pose_sources,
+                     selection.seeds or d.seeds, selection.steps or d.steps, selection.camera_size or d.camera_size,
+                     selection.switches)
+
+
+def expand_suite(suite: str | None, selection: Selection, available_policies: tuple[str, ...]) -> list[RunSpec]:
+    """Every run of `suite` (or of the custom grid when None) kept by `selection`, in a fixed order."""
+    if suite is None:
+        return custom_group(selection).expand(Selection(), available_policies)
+    groups = [g for g in SUITES[suite] if selection.groups is None or g.name in selection.groups]
+    return [run for g in groups for run in g.expand(selection, available_policies)]
+

@@ -1,0 +1,65 @@
+"""Aggregates runs into one summary record per configuration: mean and spread of every metric
+over seeds, and depth RMSE pooled over all frames of all runs (as the paper's Tables 1 and 2 report).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from trade_gym.bench.runner import RunResult
+from trade_gym.bench.suites import RunSpec
+from trade_gym.metrics import DEPTH_KINDS, METRIC_NAMES
+
+
+def metric_stats(values: Sequence[float]) -> dict[str, float | int]:
+    """mean, sample std (NaN below two values), min, max over the finite values, and their count n."""
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if not len(v):
+        return {"mean": math.nan, "std": math.nan, "min": math.nan, "max": math.nan, "n": 0}
+    std = float(np.std(v, ddof=1)) if len(v) > 1 else math.nan
+    return {"mean": float(np.mean(v)), "std": std, "min": float(np.min(v)), "max": float(np.max(v)), "n": len(v)}
+
+
+def pooled_rmse(rmses: Sequence[float], frames: Sequence[int]) -> float:
+    """RMSE over the union of the runs' frames: sqrt(sum_i rmse_i^2 n_i / sum_i n_i)."""
+    r, n = np.asarray(rmses, dtype=np.float64), np.asarray(frames, dtype=np.float64)
+    ok = np.isfinite(r) & (n > 0)
+    return float(np.sqrt(np.sum(r[ok] ** 2 * n[ok]) / np.sum(n[ok]))) if ok.any() else math.nan
+
+
+def spec_record(spec: RunSpec) -> dict[str, Any]:
+    """The fields describing a configuration (no seed)."""
+    return {"config_id": spec.config_id, "group": spec.group, "kind": spec.kind, "scene": spec.scene,
+            "policy": spec.policy, "perception": spec.perception, "pose_source": spec.pose_source,
+            "switches": dict(spec.switches), "depth_kind": spec.depth_kind}
+
+
+def summarise(results: Sequence[RunResult]) -> list[dict[str, Any]]:
+    """One record per configuration, in first-appearance order."""
+    by_config: dict[str, list[RunResult]] = {}
+    for r in results:
+        by_config.setdefault(r.spec.config_id, []).append(r)
+    summary = []
+    for runs in by_config.values():
+        ok = [r for r in runs if r.error is None]
+        record = spec_record(runs[0].spec) | {"n_runs": len(runs), "n_failed": len(runs) - len(ok)}
+        record["metrics"] = {name: metric_stats([float(r.metrics[name]) for r in ok]) for name in METRIC_NAMES}
+        for kind in DEPTH_KINDS:
+            record[f"pooled_{kind}_depth_rmse_m"] = pooled_rmse(
+                [r.metrics[f"{kind}_depth_rmse_m"] for r in ok], [r.metrics[f"{kind}_depth_frames"] for r in ok])
+        record["decoy_switches_total"] = int(sum(r.metrics["decoy_switches"] for r in ok))
+        record["crashes"] = int(sum(bool(r.metrics["crashed"]) for r in ok))
+        summary.append(record)
+    return summary
+
+
+def config_label(record: dict[str, Any]) -> str:
+    """Short label of a configuration within its group and scene (for tables and plot legends)."""
+    parts = [record["policy"], record["perception"], record["pose_source"]]
+    parts += [f"{'+' if v else '-'}{k}" for k, v in record["switches"].items()]
+    return " ".join(parts)
