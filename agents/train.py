@@ -1,0 +1,298 @@
+"""Training of learned followers with stable-baselines3 (PPO or SAC) on the oracle perception mode.
+
+Owns `TrainConfig`, the vectorised training envs (`agents.training_env`: scene and world seed drawn per
+episode), the PPO warm start and critic warm-up, and `python -m agents.train --steps N --out DIR`, which writes
+the SB3 model, the ONNX policy (`agents.export`) and a JSON record of the run (seeds, steps, wall time, hash).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from agents.obs_flatten import FlatObservation
+from agents.training_env import SceneRandomizedEnv, ZeroYawAction
+from agents.warm_start import WarmStartConfig
+from trade_gym.config import SCENE_NAMES
+
+ALGOS = ("ppo", "sac")
+FITTED_FIRST_FIX_DELAY_S = 1.7  # benchmarks/results/oracle_noise_fit.json, "fitted"
+DEMO_SEED_OFFSET = 10_000  # demonstrations use seeds seed + 10000 + rank, apart from training's
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything that determines a training run; `seed` fixes the env draws, torch and SB3."""
+
+    algo: str = "ppo"
+    total_steps: int = 300_000
+    n_envs: int = 2  # SubprocVecEnv workers (one per core)
+    seed: int = 0
+    scenes: tuple[str, ...] = SCENE_NAMES
+    episode_duration_s: float = 15.0  # shorter than the env's 30 s: more starts (the hard part) per step
+    # extra gym.make kwargs; the oracle's fitted first-fix delay is not EnvConfig's default (see there)
+    env_kwargs: tuple[tuple[str, Any], ...] = (("perception", "oracle"),
+                                               ("oracle_first_fix_delay_s", FITTED_FIRST_FIX_DELAY_S))
+    # Training reward (the env and its reward are unchanged): the env reward minus `distance_penalty_weight`
+    # x horizontal distance / follow height, and, unless `keep_env_shape_terms`, with the env's centering and
+    # altitude terms replaced by `height_hold_weight` x |height above target - its value at reset| / that
+    # value. Centering measures the target's offset in the image of a camera that tilts with the drone, so
+    # while accelerating it pays for standing off the target; the altitude term compares the height above
+    # the target's centre with the scene's height above ground, so it pays for climbing by half the target's
+    # height, and the policy cannot see which scene it is in.
+    distance_penalty_weight: float = 1.0
+    height_hold_weight: float = 0.5
+    keep_env_shape_terms: bool = False
+    hidden_units: tuple[int, ...] = (64, 64)
+    learning_rate: float = 1e-4
+    n_steps_per_env: int = 4096  # PPO rollout length per env
+    batch_size: int = 256
+    n_epochs: int = 10
+    gamma: float = 0.98
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    # PPO exploration: generalized state-dependent exploration (gSDE), noise eps = latent(x) W with W drawn
+    # every `sde_sample_freq` steps, so it is smooth in time. White per-step noise barely moves a drone
+    # whose velocity loop low-passes it, and the policy gradient then drowns in noise.
+    use_sde: bool = True
+    sde_sample_freq: int = 8
+    log_std_init: float = -3.0  # of W entries: action noise std ~0.2 (reported as exploration_std)
+    sac_buffer_size: int = 300_000  # SAC replay buffer [transitions]
+    sac_learning_starts: int = 5_000  # SAC: random-action steps before the first update
+    sac_gradient_steps: int = 1  # SAC: updates per vector-env step (n_envs transitions)
+    # PPO only: clone the scripted follower first (None: start from scratch), then train the critic alone
+    # for `critic_warmup_steps` so the first policy updates use sensible advantages.
+    warm_start: WarmStartConfig | None = WarmStartConfig()
+    critic_warmup_steps: int = 20_000
+    torch_threads: int = 1
+    progress_bar: bool = True
+    tensorboard_dir: str | None = None
+    checkpoint_every_steps: int = 0  # save checkpoints/model_<steps>.zip this often (0: never)
+    verbose: int = 0  # SB3 logging to stdout (1: rollout/train statistics every update)
+
+    def __post_init__(self) -> None:
+        if self.algo not in ALGOS:
+            raise ValueError(f"TrainConfig.algo must be one of {ALGOS}, got {self.algo!r}")
+        for name in ("total_steps", "n_envs", "n_steps_per_env", "batch_size", "n_epochs", "torch_threads",
+                     "sde_sample_freq",
+                     "sac_buffer_size", "sac_learning_starts", "sac_gradient_steps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"TrainConfig.{name} must be an integer >= 1, got {value!r}")
+        if not self.scenes or any(s not in SCENE_NAMES for s in self.scenes):
+            raise ValueError(f"TrainConfig.scenes must be a non-empty subset of {SCENE_NAMES}, got {self.scenes!r}")
+        for name in ("episode_duration_s", "learning_rate", "clip_range"):
+            if not np.isfinite(getattr(self, name)) or getattr(self, name) <= 0:
+                raise ValueError(f"TrainConfig.{name} must be > 0, got {getattr(self, name)!r}")
+        for name in ("gamma", "gae_lambda"):
+            if not 0.0 < getattr(self, name) <= 1.0:
+                raise ValueError(f"TrainConfig.{name} must be in (0, 1], got {getattr(self, name)!r}")
+        for name in ("distance_penalty_weight", "height_hold_weight", "ent_coef"):
+            if not np.isfinite(getattr(self, name)) or getattr(self, name) < 0:
+                raise ValueError(f"TrainConfig.{name} must be >= 0, got {getattr(self, name)!r}")
+        if self.warm_start is not None and self.algo != "ppo":
+            raise ValueError(f"TrainConfig.warm_start needs algo='ppo', got algo={self.algo!r}")
+        if self.critic_warmup_steps < 0 or (self.warm_start is not None
+                                            and self.critic_warmup_steps >= self.total_steps):
+            raise ValueError(f"TrainConfig.critic_warmup_steps must be in [0, total_steps), got "
+                             f"{self.critic_warmup_steps!r}")
+        if self.checkpoint_every_steps < 0 or self.verbose not in (0, 1, 2):
+            raise ValueError(f"TrainConfig.checkpoint_every_steps must be >= 0 and verbose 0, 1 or 2, got "
+                             f"{self.checkpoint_every_steps!r} and {self.verbose!r}")
+        if not self.hidden_units or any(int(h) < 1 for h in self.hidden_units):
+            raise ValueError(f"TrainConfig.hidden_units must be positive layer widths, got {self.hidden_units!r}")
+
+
+def make_training_env(config: TrainConfig, rank: int, flat: bool = True) -> Callable[[], gym.Env]:
+    """Factory of worker `rank`'s env: scene-randomised, then (flat=True, for the learner) zero yaw, flat
+    features and an episode monitor; flat=False keeps the Dict observation (for the scripted demonstrator)."""
+    from stable_baselines3.common.monitor import Monitor
+
+    def build() -> gym.Env:
+        # SB3 seeds worker `rank`'s first reset with seed + rank, which fixes its whole stream of draws
+        env = SceneRandomizedEnv(config.scenes, config.distance_penalty_weight, config.height_hold_weight,
+                                 config.keep_env_shape_terms,
+                                 episode_duration_s=config.episode_duration_s, **dict(config.env_kwargs))
+        return Monitor(FlatObservation(ZeroYawAction(env))) if flat else env
+
+    return build
+
+
+def _vec_env(config: TrainConfig, flat: bool, seed: int):
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    fns = [make_training_env(config, rank, flat) for rank in range(config.n_envs)]
+    vec_env = SubprocVecEnv(fns, start_method="spawn") if config.n_envs > 1 else DummyVecEnv(fns)
+    vec_env.seed(seed)
+    return vec_env
+
+
+def _progress_bar_available() -> bool:
+    try:
+        import rich  # noqa: F401
+        import tqdm  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def build_model(config: TrainConfig, vec_env):
+    """The SB3 model named by `config.algo` on `vec_env`, seeded."""
+    from stable_baselines3 import PPO, SAC
+
+    policy_kwargs = {"net_arch": list(config.hidden_units)}
+    common = dict(learning_rate=config.learning_rate, gamma=config.gamma, seed=config.seed, device="cpu",
+                  tensorboard_log=config.tensorboard_dir, verbose=config.verbose)
+    if config.algo == "ppo":
+        return PPO("MlpPolicy", vec_env, n_steps=config.n_steps_per_env, batch_size=config.batch_size,
+                   n_epochs=config.n_epochs, gae_lambda=config.gae_lambda, clip_range=config.clip_range,
+                   ent_coef=config.ent_coef, use_sde=config.use_sde, sde_sample_freq=config.sde_sample_freq,
+                   policy_kwargs={**policy_kwargs, "log_std_init": config.log_std_init},
+                   **common)
+    return SAC("MlpPolicy", vec_env, batch_size=config.batch_size, buffer_size=config.sac_buffer_size,
+               learning_starts=config.sac_learning_starts, gradient_steps=config.sac_gradient_steps,
+               policy_kwargs=policy_kwargs, **common)
+
+
+def warm_start(model, config: TrainConfig) -> dict:
+    """Clone the scripted follower into `model` (demonstrations on their own seeds); returns the fit record."""
+    from agents.warm_start import warm_start_ppo
+
+    demo_env = _vec_env(config, flat=False, seed=config.seed + DEMO_SEED_OFFSET)
+    try:
+        return warm_start_ppo(model.policy, demo_env, config.warm_start, config.seed, config.gamma,
+                              config.log_std_init)
+    finally:
+        demo_env.close()
+
+
+def _learn(model, config: TrainConfig, callback) -> None:
+    """PPO/SAC learning for `total_steps`; with a warm start, the actor is frozen for the critic warm-up."""
+    from agents.warm_start import actor_parameters
+
+    bar = config.progress_bar and _progress_bar_available()
+    warmup = config.critic_warmup_steps if config.warm_start is not None else 0
+    if warmup:
+        for p in actor_parameters(model.policy):
+            p.requires_grad_(False)  # Adam skips parameters without gradients
+        model.learn(total_timesteps=warmup, callback=callback, progress_bar=bar)
+        for p in actor_parameters(model.policy):
+            p.requires_grad_(True)
+    model.learn(total_timesteps=config.total_steps - model.num_timesteps, callback=callback, progress_bar=bar,
+                reset_num_timesteps=not warmup)
+
+
+def train(config: TrainConfig, out_dir: str | Path) -> dict:
+    """(Warm-start,) train, save `model.zip`, export `policy.onnx`, write and return `train_record.json`."""
+    import torch
+
+    from agents.export import export_onnx, max_export_error
+
+    if config.tensorboard_dir is not None:
+        try:
+            import tensorboard  # noqa: F401
+        except ImportError as exc:
+            raise RuntimeError("--tensorboard needs the tensorboard package (pip install tensorboard)") from exc
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(config.torch_threads)
+    start = time.perf_counter()
+    vec_env = _vec_env(config, flat=True, seed=config.seed)
+    try:
+        model = build_model(config, vec_env)
+        clone = {}
+        if config.warm_start is not None:
+            clone = warm_start(model, config)
+            # the clone alone, for comparison with the fine-tuned policy
+            clone["onnx_sha256"] = export_onnx(model, out / "policy_warm_start.onnx")
+        callback = None
+        if config.checkpoint_every_steps:
+            from stable_baselines3.common.callbacks import CheckpointCallback
+
+            every_call = max(config.checkpoint_every_steps // config.n_envs, 1)  # one call steps every env
+            callback = CheckpointCallback(every_call, str(out / "checkpoints"), name_prefix="model")
+        _learn(model, config, callback)
+    finally:
+        vec_env.close()
+    wall_s = time.perf_counter() - start
+    model.save(out / "model.zip")
+    digest = export_onnx(model, out / "policy.onnx")
+    record = {
+        "config": asdict(config),
+        "steps": int(model.num_timesteps),
+        "warm_start": clone,
+        "wall_time_s": round(wall_s, 1),
+        "steps_per_s": round(model.num_timesteps / wall_s, 1),
+        "onnx_sha256": digest,
+        "onnx_bytes": (out / "policy.onnx").stat().st_size,
+        "max_abs_onnx_minus_sb3": max_export_error(model, out / "policy.onnx", np.random.default_rng(config.seed)),
+        "torch_version": torch.__version__,
+    }
+    (out / "train_record.json").write_text(json.dumps(record, indent=2))
+    return record
+
+
+def _parse_env_kwarg(text: str) -> tuple[str, Any]:
+    """"key=value" with a JSON value (numbers, true/false, strings in quotes) or a bare string."""
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"--env expects key=value, got {text!r}")
+    try:
+        return key, json.loads(value)
+    except json.JSONDecodeError:
+        return key, value
+
+
+def main(argv: list[str] | None = None) -> None:
+    defaults = TrainConfig()
+    parser = argparse.ArgumentParser(description="Train a learned follower (SB3) on the oracle perception and "
+                                                 "export it to ONNX.")
+    parser.add_argument("--steps", type=int, default=defaults.total_steps, help="environment steps in total")
+    parser.add_argument("--out", type=Path, required=True, help="directory for model.zip, policy.onnx, record")
+    parser.add_argument("--algo", choices=ALGOS, default=defaults.algo)
+    parser.add_argument("--n-envs", type=int, default=defaults.n_envs, help="SubprocVecEnv workers")
+    parser.add_argument("--seed", type=int, default=defaults.seed)
+    parser.add_argument("--scenes", nargs="+", default=list(defaults.scenes), choices=SCENE_NAMES)
+    parser.add_argument("--episode-duration-s", type=float, default=defaults.episode_duration_s)
+    parser.add_argument("--distance-penalty-weight", type=float, default=defaults.distance_penalty_weight)
+    parser.add_argument("--height-hold-weight", type=float, default=defaults.height_hold_weight)
+    parser.add_argument("--keep-env-shape-terms", action="store_true",
+                        help="train on the env's centering and altitude terms instead of distance and height hold")
+    parser.add_argument("--env", type=_parse_env_kwarg, action="append", default=[], metavar="KEY=VALUE",
+                        help="extra gym.make kwarg (repeatable), e.g. --env oracle_dropout_prob=0.1")
+    parser.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
+    parser.add_argument("--demo-steps", type=int, default=defaults.warm_start.demo_steps,
+                        help="scripted demonstrations for the PPO warm start (0: train from scratch)")
+    parser.add_argument("--critic-warmup-steps", type=int, default=defaults.critic_warmup_steps)
+    parser.add_argument("--checkpoint-every", type=int, default=0, metavar="STEPS", help="save checkpoints")
+    parser.add_argument("--verbose", type=int, default=0, choices=(0, 1, 2), help="SB3 log level")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    args = parser.parse_args(argv)
+    env_kwargs = dict(defaults.env_kwargs) | dict(args.env)
+    clone = WarmStartConfig(demo_steps=args.demo_steps) if args.demo_steps > 0 and args.algo == "ppo" else None
+    config = TrainConfig(algo=args.algo, total_steps=args.steps, n_envs=args.n_envs, seed=args.seed,
+                         scenes=tuple(args.scenes), episode_duration_s=args.episode_duration_s,
+                         env_kwargs=tuple(sorted(env_kwargs.items())),
+                         distance_penalty_weight=args.distance_penalty_weight,
+                         height_hold_weight=args.height_hold_weight, keep_env_shape_terms=args.keep_env_shape_terms,
+                         tensorboard_dir=args.tensorboard,
+                         progress_bar=not args.no_progress, checkpoint_every_steps=args.checkpoint_every,
+                         verbose=args.verbose, warm_start=clone,
+                         critic_warmup_steps=args.critic_warmup_steps if clone is not None else 0)
+    record = train(config, args.out)
+    summary = ("steps", "warm_start", "wall_time_s", "steps_per_s", "onnx_sha256", "onnx_bytes",
+               "max_abs_onnx_minus_sb3")
+    print(json.dumps({k: record[k] for k in summary}, indent=2))
+
+
+if __name__ == "__main__":
+    main()

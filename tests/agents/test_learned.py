@@ -1,0 +1,128 @@
+"""LearnedFollower: verified loading (missing, empty, truncated, tampered files), the predict contract,
+no torch at run time, and the shipped policy in closed loop."""
+
+from __future__ import annotations
+
+import hashlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from agents.learned import DEFAULT_POLICY, AgentError, LearnedFollower, PolicyModelError
+from agents.scripted import ScriptedFollower
+from trade_gym import metrics
+from trade_gym.observation import observation_space
+from trade_gym.rollout import run_episode
+
+MIN_VISIBLE_FRACTION = 0.95
+EVAL_SEEDS = (100, 101)  # not the training seeds (those are drawn from seed 0's stream) nor the bench's 0-4
+EVAL_STEPS = 300
+
+
+@pytest.fixture(scope="module")
+def shipped_bytes() -> bytes:
+    return DEFAULT_POLICY.read_bytes()
+
+
+def write(tmp_path, data: bytes):
+    path = tmp_path / "policy.onnx"
+    path.write_bytes(data)
+    return path
+
+
+def test_load_missing_file_raises_policy_model_error_naming_it(tmp_path):
+    path = tmp_path / "absent.onnx"
+    with pytest.raises(PolicyModelError, match="absent.onnx.*missing"):
+        LearnedFollower(path)
+
+
+def test_load_empty_file_raises_policy_model_error_naming_it(tmp_path):
+    path = write(tmp_path, b"")
+    with pytest.raises(PolicyModelError, match=f"{path}.*empty"):
+        LearnedFollower(path)
+
+
+def test_load_truncated_file_raises_policy_model_error_naming_it(tmp_path, shipped_bytes):
+    path = write(tmp_path, shipped_bytes[: len(shipped_bytes) // 2])
+    with pytest.raises(PolicyModelError, match=f"{path}.*SHA-256"):
+        LearnedFollower(path)
+
+
+def test_load_truncated_file_with_its_own_hash_fails_to_parse(tmp_path, shipped_bytes):
+    data = shipped_bytes[: len(shipped_bytes) // 2]
+    path = write(tmp_path, data)
+    with pytest.raises(PolicyModelError, match=f"{path}.*not a loadable ONNX model"):
+        LearnedFollower(path, hashlib.sha256(data).hexdigest())
+
+
+def test_load_tampered_file_raises_policy_model_error_naming_it(tmp_path, shipped_bytes):
+    data = bytearray(shipped_bytes)
+    data[len(data) // 2] ^= 0xFF
+    path = write(tmp_path, bytes(data))
+    with pytest.raises(PolicyModelError, match=f"{path}.*SHA-256"):
+        LearnedFollower(path)
+
+
+def test_policy_model_error_is_an_agent_error():
+    assert issubclass(PolicyModelError, AgentError) and issubclass(AgentError, Exception)
+
+
+def test_load_malformed_expected_hash_raises_value_error():
+    with pytest.raises(ValueError, match="expected_sha256"):
+        LearnedFollower(DEFAULT_POLICY, "not-a-hash")
+
+
+def test_import_agents_and_learned_does_not_import_torch():
+    code = ("import sys, agents; from agents import LearnedFollower; LearnedFollower(); "
+            "assert 'torch' not in sys.modules and 'stable_baselines3' not in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_predict_single_and_batched_observations_agree_and_stay_in_bounds():
+    follower = LearnedFollower()
+    space = observation_space()
+    space.seed(0)
+    observations = [space.sample() for _ in range(8)]
+    batch = {key: np.stack([o[key] for o in observations]) for key in observations[0]}
+    state = object()
+    batched, returned_state = follower.predict(batch, state=state, episode_start=np.ones(8, bool))
+    assert returned_state is state and batched.shape == (8, 4) and batched.dtype == np.float32
+    singles = np.stack([follower.predict(o)[0] for o in observations])
+    np.testing.assert_array_equal(batched, singles)
+    assert np.all(np.abs(batched) <= 1.0) and np.all(batched[:, 3] == 0.0)
+
+
+def test_predict_target_ahead_and_left_moves_forward_and_left():
+    follower = LearnedFollower()
+    obs = {
+        "target_pos_rel_m": np.array([6.0, 4.0, -16.0], np.float32),
+        "target_vel_mps": np.zeros(3, np.float32),
+        "drone_vel_mps": np.zeros(3, np.float32),
+        "bbox_norm": np.array([0.4, 0.3, 0.05, 0.08], np.float32),
+        "target_depth_m": np.array([16.0], np.float32),
+        "track_valid": np.array([1.0], np.float32),
+        "time_lost_s": np.array([0.0], np.float32),
+        "imu": np.array([0.0, 0.0, 9.81, 0.0, 0.0, 0.0], np.float32),
+    }
+    action, _ = follower.predict(obs)
+    assert action[0] > 0.0 and action[1] > 0.0
+
+
+def test_shipped_policy_keeps_target_in_view_full_oracle_episode():
+    infos = run_episode(LearnedFollower(), seed=100, scene="desert", perception="oracle")
+    assert len(infos) == 900  # the full 30 s, neither crashed nor lost
+    assert not any(i["crashed"] for i in infos)
+    assert np.mean([i["target_visible"] for i in infos]) >= MIN_VISIBLE_FRACTION
+
+
+@pytest.mark.parametrize("scene", ["desert", "mountain"])
+def test_shipped_policy_follows_closer_than_scripted_on_oracle(scene):
+    def mean_distance(make_policy) -> float:
+        return float(np.mean([metrics.mean_horizontal_distance(
+            run_episode(make_policy(), seed, max_steps=EVAL_STEPS, scene=scene, perception="oracle"))
+            for seed in EVAL_SEEDS]))
+
+    learned, scripted = mean_distance(LearnedFollower), mean_distance(ScriptedFollower)
+    assert learned < scripted, f"{scene}: learned {learned:.2f} m vs scripted {scripted:.2f} m"

@@ -1,0 +1,128 @@
+"""Training: a tiny PPO budget on an easy configuration beats a seeded random policy; config validation;
+the scene-randomised env's draws, shaping term and action wrapper."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agents.learned import LearnedFollower
+from agents.train import TrainConfig, train
+from agents.training_env import SceneRandomizedEnv, ZeroYawAction
+from trade_gym.reward import RewardConfig
+from trade_gym.rollout import run_episode
+from trade_gym.sim.scenes import get_scene
+
+# Easy: the slow city target, short episodes, the 3D fix from the first frame, cheap resets.
+EASY_ENV = (("perception", "oracle"), ("oracle_first_fix_delay_s", 0.0))
+EASY_SCENE = "city"
+EPISODE_S = 4.0
+TINY = TrainConfig(total_steps=2048, n_envs=1, n_steps_per_env=512, batch_size=128, n_epochs=10,
+                   learning_rate=3e-4, use_sde=False, log_std_init=-1.5, keep_env_shape_terms=True,
+                   scenes=(EASY_SCENE,), episode_duration_s=EPISODE_S, env_kwargs=EASY_ENV, progress_bar=False,
+                   seed=0, warm_start=None)
+EVAL_SEEDS = (1000, 1001, 1002)
+MIN_RETURN_MARGIN = 20.0  # mean per episode of 120 steps (random flails: altitude, centering, effort terms)
+
+
+class RandomPolicy:
+    def __init__(self, seed: int) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        return self.rng.uniform(-1.0, 1.0, 4).astype(np.float32), state
+
+
+def returns(policy) -> np.ndarray:
+    """Env return (no training shaping) of each fixed-seed evaluation episode."""
+    kwargs = dict(EASY_ENV) | {"scene": EASY_SCENE, "episode_duration_s": EPISODE_S}
+    return np.array([sum(i["reward_" + t] for i in run_episode(policy, seed, **kwargs)
+                         for t in ("visible", "centering", "altitude", "effort", "crash"))
+                     for seed in EVAL_SEEDS])
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("tiny_ppo")
+    return out, train(TINY, out)
+
+
+def test_train_tiny_ppo_beats_seeded_random_policy(tiny_run):
+    out, record = tiny_run
+    learned = returns(LearnedFollower(out / "policy.onnx", record["onnx_sha256"]))
+    random = returns(RandomPolicy(seed=0))
+    assert learned.mean() > random.mean() + MIN_RETURN_MARGIN, f"learned {learned} vs random {random}"
+
+
+def test_train_record_holds_steps_hash_and_export_check(tiny_run):
+    out, record = tiny_run
+    assert record["steps"] >= TINY.total_steps and record["wall_time_s"] > 0
+    assert record["max_abs_onnx_minus_sb3"] <= 1e-5
+    assert (out / "model.zip").is_file() and (out / "policy.onnx").stat().st_size == record["onnx_bytes"]
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"algo": "a2c"}, "algo"), ({"total_steps": 0}, "total_steps"), ({"scenes": ("moon",)}, "scenes"),
+    ({"gamma": 1.5}, "gamma"), ({"distance_penalty_weight": -1.0}, "distance_penalty_weight"),
+    ({"height_hold_weight": float("nan")}, "height_hold_weight"), ({"algo": "sac"}, "warm_start"),
+    ({"n_envs": 1.5}, "n_envs"), ({"hidden_units": ()}, "hidden_units"),
+])
+def test_train_config_bad_value_raises_value_error_naming_field(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        TrainConfig(**kwargs)
+
+
+TERMS = ("visible", "centering", "altitude", "effort", "crash", "shaping_distance", "shaping_replaced")
+
+
+def scene_draws(seed: int) -> list[tuple[str, int]]:
+    env = SceneRandomizedEnv(("city", "mountain"), 1.0, perception="oracle", episode_duration_s=0.2)
+    try:
+        return [(info["scene"], info["world_seed"]) for info in
+                [env.reset(seed=seed)[1]] + [env.reset()[1] for _ in range(5)]]
+    finally:
+        env.close()
+
+
+def test_scene_randomized_env_same_seed_draws_same_scenes_and_distinct_worlds():
+    first = scene_draws(7)
+    assert first == scene_draws(7) and first != scene_draws(8)
+    assert {scene for scene, _ in first} == {"city", "mountain"} and len({s for _, s in first}) == len(first)
+
+
+@pytest.mark.parametrize("keep_shape_terms", [True, False])
+def test_scene_randomized_env_reward_is_sum_of_terms_with_distance_shaping(keep_shape_terms):
+    env = SceneRandomizedEnv(("city",), 2.0, 0.5, keep_shape_terms, perception="oracle", episode_duration_s=1.0)
+    try:
+        _, info = env.reset(seed=0)
+        start_height = info["drone_position_m"][2] - info["target_position_m"][2]
+        for _ in range(5):
+            _, reward, _, _, info = env.step(np.array([0.5, 0.0, 1.0, 0.0], np.float32))
+        assert reward == pytest.approx(sum(info["reward_" + t] for t in TERMS))
+        height = get_scene("city").follow_altitude_agl_m
+        assert info["reward_shaping_distance"] == pytest.approx(-2.0 * info["horizontal_distance_m"] / height)
+        assert info["reward_centering"] < 0.0  # the drone has flown off the target
+        if keep_shape_terms:
+            assert info["reward_shaping_replaced"] == 0.0
+        else:  # centering and altitude replaced by the height-hold term (the drone climbed)
+            climb = info["drone_position_m"][2] - info["target_position_m"][2] - start_height
+            assert climb > 0.0
+            expected = -info["reward_centering"] - info["reward_altitude"] - 0.5 * climb / start_height
+            assert info["reward_shaping_replaced"] == pytest.approx(expected)
+    finally:
+        env.close()
+
+
+def test_zero_yaw_action_appends_zero_yaw_rate_and_steps_the_env():
+    env = SceneRandomizedEnv(("city",), 0.0, perception="oracle", episode_duration_s=0.2)
+    wrapped = ZeroYawAction(env)
+    try:
+        assert wrapped.action_space.shape == (3,)
+        action = np.array([0.5, -0.5, 0.1], np.float32)
+        np.testing.assert_array_equal(wrapped.action(action), np.array([0.5, -0.5, 0.1, 0.0], np.float32))
+        wrapped.reset(seed=0)
+        _, _, _, _, info = wrapped.step(action)
+        effort = -RewardConfig().effort_weight * float(np.sum(action.astype(np.float64) ** 2)) / 4
+        assert info["reward_effort"] == pytest.approx(effort)
+    finally:
+        wrapped.close()
