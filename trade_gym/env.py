@@ -131,14 +131,14 @@ class TradeFollowEnv(gym.Env):
         self.world = build_world(cid, self.config.scene, world_rng, self.config.target_speed_mps)
         start_position, start_yaw = self.world.drone_start()
         self.quadrotor.spawn(start_position, start_yaw)
+        self._state = self.quadrotor.read_state()
         self.imu = Imu(self.imu_config, rng)
-        self.imu.reset(0.0, rng)
+        self._prime_imu_at_hover(rng)
         self.pose_source = make_pose_source(self.config.pose_source, rng=rng)
         self._t_s = 0.0
         self._cache_parked_decoys()
         self._steps = 0
         self._distance_flown_m = 0.0
-        self._state = self.quadrotor.read_state()
         self._time_lost_s = 0.0
         self._time_target_hidden_s = 0.0
         self._needs_reset = False
@@ -262,6 +262,18 @@ class TradeFollowEnv(gym.Env):
     def _true_camera_pose(self) -> Pose:
         """The camera's exact pose at the current frame (computed once per frame in `_sense`)."""
         return self._T_world_cam_true
+
+    def _prime_imu_at_hover(self, rng: np.random.Generator) -> None:
+        """The IMU runs before the episode starts: the first observation carries the samples of one frame
+        period (rounded up to whole IMU periods) taken while the drone hovered still at its start pose, so it
+        holds a real, seeded reading (gravity on the body z axis plus noise and bias) instead of zeros."""
+        rate_hz = self.imu_config.rate_hz
+        lead_s = math.ceil(rate_hz / CAMERA_RATE_HZ) / rate_hz
+        self.imu.reset(-lead_s, rng)
+        hover_force_body = self._state.R_world_body.T @ np.array([0.0, 0.0, GRAVITY_MPS2])
+        still = np.zeros(3)
+        self.imu.add_truth(-lead_s, hover_force_body, still)
+        self.imu.add_truth(0.0, hover_force_body, still)
 
     def _sense(self) -> tuple[SensorFrame, GroundTruth]:
         T_world_cam = self.camera.pose(self._state.R_world_body, self._state.position_m)

@@ -172,3 +172,18 @@ def test_seeds_0_to_9_give_10_distinct_initial_observations_trade():
     finally:
         env.close()
     assert len(firsts) == N_SEEDS
+
+
+def test_reset_observation_carries_the_hover_imu_reading_seeded():
+    """The IMU ran before the episode: the first observation holds gravity on body z plus seeded noise."""
+    env = TradeFollowEnv(**ORACLE, **FAST)
+    try:
+        first = env.reset(seed=3)[0]["imu"]
+        again = env.reset(seed=3)[0]["imu"]
+        other = env.reset(seed=4)[0]["imu"]
+    finally:
+        env.close()
+    accel, gyro = first[:3], first[3:]
+    assert abs(accel[2] - 9.81) < 0.2 and np.all(np.abs(accel[:2]) < 0.2)
+    assert np.all(np.abs(gyro) < 0.02)
+    assert np.array_equal(first, again) and not np.array_equal(first, other)
