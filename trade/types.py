@@ -47,13 +47,19 @@ class BBox:
 
 
 def iou(a: npt.ArrayLike, b: npt.ArrayLike) -> float:
-    """IoU of two (x, y, w, h) boxes; 0.0 when either is missing (NaN) or empty."""
-    ax, ay, aw, ah = (float(v) for v in a)
-    bx, by, bw, bh = (float(v) for v in b)
-    if not all(math.isfinite(v) for v in (ax, ay, aw, ah, bx, by, bw, bh)):
+    """IoU of two (x, y, w, h) boxes; 0.0 when either is missing (NaN or inf) or empty.
+
+    Scalar code without generators or builtin min/max calls: the env scores the estimate against the
+    target and every decoy in view each step."""
+    ax, ay, aw, ah = map(float, a)
+    bx, by, bw, bh = map(float, b)
+    if not math.isfinite(ax + ay + aw + ah + bx + by + bw + bh):  # any NaN or inf makes the sum non-finite
         return 0.0
-    ix = max(0.0, min(ax + aw, bx + bw) - max(ax, bx))
-    iy = max(0.0, min(ay + ah, by + bh) - max(ay, by))
+    a_right, b_right, a_bottom, b_bottom = ax + aw, bx + bw, ay + ah, by + bh
+    ix = (a_right if a_right < b_right else b_right) - (ax if ax > bx else bx)
+    iy = (a_bottom if a_bottom < b_bottom else b_bottom) - (ay if ay > by else by)
+    if ix <= 0.0 or iy <= 0.0:
+        return 0.0
     inter = ix * iy
     union = aw * ah + bw * bh - inter
     return inter / union if union > 0 else 0.0
