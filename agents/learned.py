@@ -6,8 +6,6 @@ loader of the policy file and its errors (`PolicyModelError`, a subclass of `Age
 
 from __future__ import annotations
 
-import hashlib
-import re
 from pathlib import Path
 from typing import Any
 
@@ -15,20 +13,20 @@ import numpy as np
 import onnxruntime as ort
 
 from agents.obs_flatten import N_FEATURES, flatten_observation
+from trade.model_file import ModelFileError, check_sha256_format, open_verified_session
 from assets import ASSETS_DIR
 
 DEFAULT_POLICY = ASSETS_DIR / "policies" / "follower_ppo.onnx"
 # SHA-256 of the shipped policy, printed by `python -m agents.train` and recorded in follower_ppo.md
 DEFAULT_POLICY_SHA256 = "2785447168567f43bc7ba348fa4da4b7af506323a89d31b7577326a1f8dca6b7"
 ACTION_DIM = 4
-_SHA256_RE = re.compile(r"[0-9a-f]{64}")
 
 
 class AgentError(Exception):
     """Base of the errors raised by the agents package."""
 
 
-class PolicyModelError(AgentError):
+class PolicyModelError(AgentError, ModelFileError):
     """The policy file is missing, empty, truncated, tampered with or not a usable policy model."""
 
 
@@ -40,10 +38,9 @@ class LearnedFollower:
     It is memoryless, so `state` and `episode_start` are passed through unused."""
 
     def __init__(self, model_path: str | Path = DEFAULT_POLICY, expected_sha256: str = DEFAULT_POLICY_SHA256) -> None:
-        if not isinstance(expected_sha256, str) or not _SHA256_RE.fullmatch(expected_sha256):
-            raise ValueError(f"expected_sha256 must be 64 lowercase hex digits, got {expected_sha256!r}")
+        check_sha256_format(expected_sha256)
         self.model_path = Path(model_path)
-        self._session = _open_session(self.model_path, expected_sha256)
+        self._session = open_verified_session(self.model_path, expected_sha256, "policy file", PolicyModelError)
         self._input_name = _check_io(self._session, self.model_path)
 
     def reset(self) -> None:
@@ -61,27 +58,6 @@ class LearnedFollower:
         (action,) = self._session.run(None, {self._input_name: features})
         action = np.asarray(action, dtype=np.float32)
         return (action if batched else action[0]), state
-
-
-def _open_session(path: Path, expected_sha256: str) -> ort.InferenceSession:
-    """Read `path`, verify its SHA-256 and build a single-threaded session; PolicyModelError names the file."""
-    if not path.is_file():
-        raise PolicyModelError(f"policy file {path} is missing")
-    data = path.read_bytes()
-    if not data:
-        raise PolicyModelError(f"policy file {path} is empty")
-    digest = hashlib.sha256(data).hexdigest()
-    if digest != expected_sha256:
-        raise PolicyModelError(f"policy file {path} has SHA-256 {digest}, expected {expected_sha256} "
-                               "(truncated, tampered with or a different policy)")
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = 1
-    options.inter_op_num_threads = 1
-    options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-    try:
-        return ort.InferenceSession(data, options, providers=["CPUExecutionProvider"])
-    except Exception as exc:  # onnxruntime raises its own (non-public) exception types
-        raise PolicyModelError(f"policy file {path} is not a loadable ONNX model: {exc}") from exc
 
 
 def _check_io(session: ort.InferenceSession, path: Path) -> str:

@@ -27,6 +27,7 @@ from trade_gym.config import CAMERA_RATE_HZ
 from trade_gym.env import TradeFollowEnv
 from trade_gym.ground_truth import GroundTruth
 from trade_gym.perception.base import FloatArray, Perception, PerceptionOutput, SensorFrame
+from trade_gym.rollout import fly_episode
 
 MIN_IOU_FOR_ERRORS = 0.3  # frames on the wrong object are dropouts of the model, not its jitter
 MIN_LAG1_CORRELATION = 1e-3  # below this the errors count as white (correlation time 0)
@@ -82,15 +83,8 @@ def fly(scene: str, seed: int, steps: int, camera_size: int) -> tuple[FrameLog, 
     env = TradeFollowEnv(scene=scene, perception="trade", camera_size=camera_size)
     recorder = RecordingPerception(env.perception, env, env.config.visible_fraction_threshold)
     env.perception = recorder
-    policy, infos = ScriptedFollower(), []
     try:
-        obs, _ = env.reset(seed=seed)
-        for k in range(steps):
-            action, _ = policy.predict(obs, episode_start=np.array([k == 0]))
-            obs, _, terminated, truncated, info = env.step(action)
-            infos.append(info)
-            if terminated or truncated:
-                break
+        infos = fly_episode(env, ScriptedFollower(), seed, steps)
     finally:
         env.close()
     run = {"scene": scene, "seed": seed, "steps": len(infos),

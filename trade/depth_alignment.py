@@ -146,11 +146,7 @@ def fit_affine_inverse_depth(model_inv: npt.ArrayLike, feature_inv_m: npt.ArrayL
     inlier residual), then least squares on its inliers. Non-finite or non-positive rho are not used.
     """
     cfg = config if config is not None else AffineFitConfig()
-    x_all = np.asarray(model_inv, dtype=np.float64).reshape(-1)
-    y_all = np.asarray(feature_inv_m, dtype=np.float64).reshape(-1)
-    if x_all.shape != y_all.shape:
-        raise ValueError(f"model_inv and feature_inv_m must have the same length, got {x_all.size}, {y_all.size}")
-    usable = np.isfinite(x_all) & np.isfinite(y_all) & (y_all > 0.0)
+    x_all, y_all, usable = _usable_pairs(model_inv, feature_inv_m)
     pix = None if pixels_px is None else np.asarray(pixels_px, dtype=np.float64).reshape(-1, 2)[usable]
     x, y, count = x_all[usable], y_all[usable], int(usable.sum())
     if count < cfg.min_correspondences:
@@ -180,6 +176,15 @@ def fit_affine_inverse_depth(model_inv: npt.ArrayLike, feature_inv_m: npt.ArrayL
     return AffineFit(t0, t1, inliers, FitStatus.OK, _rms(t0, t1, x[final], y[final]))
 
 
+def _usable_pairs(model_inv: npt.ArrayLike, feature_inv_m: npt.ArrayLike) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """(x_all, y_all) flattened, and the mask of pairs a fit may use: both finite, rho > 0."""
+    x_all = np.asarray(model_inv, dtype=np.float64).reshape(-1)
+    y_all = np.asarray(feature_inv_m, dtype=np.float64).reshape(-1)
+    if x_all.shape != y_all.shape:
+        raise ValueError(f"model_inv and feature_inv_m must have the same length, got {x_all.size}, {y_all.size}")
+    return x_all, y_all, np.isfinite(x_all) & np.isfinite(y_all) & (y_all > 0.0)
+
+
 def fit_affine_least_squares(model_inv: npt.ArrayLike, feature_inv_m: npt.ArrayLike,
                              config: AffineFitConfig | None = None) -> AffineFit:
     """model_inv (M,) rho', feature_inv_m (M,) rho [1/m] -> one least-squares fit over every usable pair.
@@ -188,11 +193,7 @@ def fit_affine_least_squares(model_inv: npt.ArrayLike, feature_inv_m: npt.ArrayL
     TOO_FEW_POINTS below min_correspondences, DEGENERATE when rho' is constant, NO_CONSENSUS when theta1 <= 0.
     """
     cfg = config if config is not None else AffineFitConfig()
-    x_all = np.asarray(model_inv, dtype=np.float64).reshape(-1)
-    y_all = np.asarray(feature_inv_m, dtype=np.float64).reshape(-1)
-    if x_all.shape != y_all.shape:
-        raise ValueError(f"model_inv and feature_inv_m must have the same length, got {x_all.size}, {y_all.size}")
-    usable = np.isfinite(x_all) & np.isfinite(y_all) & (y_all > 0.0)
+    x_all, y_all, usable = _usable_pairs(model_inv, feature_inv_m)
     x, y = x_all[usable], y_all[usable]
     if x.size < cfg.min_correspondences:
         return AffineFit.failed(FitStatus.TOO_FEW_POINTS, x_all.size)

@@ -6,8 +6,6 @@ training, and the held-out metric: AbsRel / delta1 after per-frame scale-and-shi
 
 from __future__ import annotations
 
-import hashlib
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,6 +13,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 import onnxruntime as ort
+
+from trade.model_file import ModelFileError, check_sha256_format, open_verified_session
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -29,10 +29,9 @@ RGB_STD = np.array([0.229, 0.224, 0.225], dtype=np.float32)
 UINT8_MAX = 255.0
 DELTA1_RATIO = 1.25  # delta1 = fraction of pixels with max(d'/d, d/d') < 1.25
 SKY_DEPTH_FRACTION = 0.99  # depth >= this x far_m: nothing was hit (sky), not a valid target
-_SHA256_RE = re.compile(r"[0-9a-f]{64}")
 
 
-class DepthModelError(Exception):
+class DepthModelError(ModelFileError):
     """The depth model file is missing, empty, truncated, tampered with or not a usable model."""
 
 
@@ -57,13 +56,12 @@ class SingleImageDepth:
 
     def __init__(self, model_path: str | Path = DEFAULT_MODEL, expected_sha256: str = DEFAULT_MODEL_SHA256,
                  input_size_px: int = DEFAULT_INPUT_SIZE_PX) -> None:
-        if not isinstance(expected_sha256, str) or not _SHA256_RE.fullmatch(expected_sha256):
-            raise ValueError(f"expected_sha256 must be 64 lowercase hex digits, got {expected_sha256!r}")
+        check_sha256_format(expected_sha256)
         if int(input_size_px) != input_size_px or input_size_px <= 0:
             raise ValueError(f"input_size_px must be a positive integer, got {input_size_px!r}")
         self.model_path = Path(model_path)
         self.input_size_px = int(input_size_px)
-        self._session = _open_session(self.model_path, expected_sha256)
+        self._session = open_verified_session(self.model_path, expected_sha256, "depth model file", DepthModelError)
         self._input_name = _check_io(self._session, self.model_path, self.input_size_px)
 
     def predict(self, rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
@@ -80,28 +78,6 @@ class SingleImageDepth:
         if (h, w) == (s, s):
             return inv
         return cv2.resize(inv, (w, h), interpolation=cv2.INTER_LINEAR)
-
-
-def _open_session(path: Path, expected_sha256: str) -> ort.InferenceSession:
-    """Read `path`, verify its SHA-256 and build a single-threaded session; DepthModelError names the file."""
-    if not path.is_file():
-        raise DepthModelError(f"depth model file {path} is missing")
-    data = path.read_bytes()
-    if not data:
-        raise DepthModelError(f"depth model file {path} is empty")
-    digest = hashlib.sha256(data).hexdigest()
-    if digest != expected_sha256:
-        raise DepthModelError(f"depth model file {path} has SHA-256 {digest}, expected {expected_sha256} "
-                              "(truncated, tampered with or a different model)")
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = 1
-    options.inter_op_num_threads = 1
-    options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-    options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    try:
-        return ort.InferenceSession(data, options, providers=["CPUExecutionProvider"])
-    except Exception as exc:  # onnxruntime raises its own (non-public) exception types
-        raise DepthModelError(f"depth model file {path} is not a loadable ONNX model: {exc}") from exc
 
 
 def _check_io(session: ort.InferenceSession, path: Path, size_px: int) -> str:

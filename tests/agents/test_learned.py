@@ -12,6 +12,7 @@ import pytest
 
 from agents.learned import DEFAULT_POLICY, AgentError, LearnedFollower, PolicyModelError
 from agents.scripted import ScriptedFollower
+from trade.model_file import ModelFileError
 from trade_gym import metrics
 from trade_gym.observation import observation_space
 from trade_gym.rollout import run_episode
@@ -34,8 +35,9 @@ def write(tmp_path, data: bytes):
 
 def test_load_missing_file_raises_policy_model_error_naming_it(tmp_path):
     path = tmp_path / "absent.onnx"
-    with pytest.raises(PolicyModelError, match="absent.onnx.*missing"):
+    with pytest.raises(PolicyModelError, match="absent.onnx.*missing") as raised:
         LearnedFollower(path)
+    assert isinstance(raised.value, ModelFileError)  # the one project error type for model files
 
 
 def test_load_empty_file_raises_policy_model_error_naming_it(tmp_path):

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import trade_gym  # noqa: F401  (registers TradeFollow-v0)
+from trade.model_file import ModelFileError
 from trade.single_image_depth import DEFAULT_MODEL, DepthModelError
 from trade_gym.config import EnvConfig
 from trade_gym.env import TradeFollowEnv
@@ -123,6 +124,7 @@ def test_env_with_damaged_depth_model_raises_depth_model_error_naming_the_file(d
     original = trade_stack.SingleImageDepth
     monkeypatch.setattr(trade_stack, "SingleImageDepth", lambda: original(model_path=path))
     start = time.perf_counter()
-    with pytest.raises(DepthModelError, match=str(path)):
+    with pytest.raises(DepthModelError, match=str(path)) as raised:
         gym.make("TradeFollow-v0", ground_mask=True, camera_size=64)
     assert time.perf_counter() - start < MAKE_TIME_LIMIT_S
+    assert isinstance(raised.value, ModelFileError)  # the one project error type for model files
