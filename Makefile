@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/trade-bench --suite quick --out demo_out
+	$(VENV)/bin/trade-bench --suite quick --out demo_out --video
 
 test: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider

@@ -41,7 +41,7 @@ class RandomPolicy:
 def learned_unavailable_reason() -> str | None:
     """None when `agents.learned.LearnedFollower()` loads its default model, else why it does not."""
     try:
-        from agents.learned import LearnedFollower  # written separately; may be absent
+        from agents.learned import LearnedFollower
     except ImportError as exc:
         return f"agents.learned is not importable ({exc})"
     try:
