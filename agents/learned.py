@@ -18,7 +18,7 @@ from assets import ASSETS_DIR
 
 DEFAULT_POLICY = ASSETS_DIR / "policies" / "follower_ppo.onnx"
 # SHA-256 of the shipped policy, printed by `python -m agents.train` and recorded in follower_ppo.md
-DEFAULT_POLICY_SHA256 = "2785447168567f43bc7ba348fa4da4b7af506323a89d31b7577326a1f8dca6b7"
+DEFAULT_POLICY_SHA256 = "385343ea465a41a1b14b5b5a12d0b7fb41180b7136ab01c4d3ae1eb0c54ae050"
 ACTION_DIM = 4
 
 
