@@ -161,6 +161,7 @@ class TradePipeline:
         self.refiner = ColourBoxRefiner(config.colour_box)
         self._box: BBox | None = None  # last output box
         self._image_motion_px = np.zeros(2)  # last frame-to-frame shift of the tracked box centre (x, y)
+        self._tracked_last = True  # whether the previous frame was tracked (its shift is then current)
         self.trajectory = TrajectoryModel(config.trajectory)
         self.roi = RoiFeatureTracker(config.roi, intrinsics)
         self._min_plane_points = config.min_masked_plane_points if config.ground_mask else config.min_plane_points
@@ -182,6 +183,7 @@ class TradePipeline:
         self.refiner.init(image_rgb, box)
         self._box = box
         self._image_motion_px = np.zeros(2)
+        self._tracked_last = True
         self.trajectory = TrajectoryModel(self.config.trajectory)
         self.roi.reset()
         self.fusion.reset()
@@ -221,6 +223,9 @@ class TradePipeline:
             box = self._refine_box(image_rgb, dcf_box, learn=not choice.ambiguous)
         else:
             box = self._coast_box(predicted_px)
+            # the last shift is stale once a frame goes untracked: no constant-image-velocity guess
+            self._image_motion_px = np.zeros(2)
+        self._tracked_last = tracked
         self._box = box
         tracker_ms = (time.perf_counter() - start) * 1e3
         start = time.perf_counter()
@@ -246,7 +251,8 @@ class TradePipeline:
         guided = self._in_image(predicted_px)
         motion_px = last_px + self._image_motion_px  # where constant image velocity puts the target
         choice, scale = self._select(image_rgb, predicted_px if guided else motion_px)
-        if not (guided and self._far_apart(predicted_px, motion_px)):
+        # only while tracking: after an untracked frame the box's last shift says nothing about the target
+        if not (guided and self._tracked_last and self._far_apart(predicted_px, motion_px)):
             return choice, scale
         # The prediction is only as good as the 3D estimate behind it (e.g. a roof taken for the ground
         # puts the target at a wrong depth and the prediction drifts off it). When it has moved the
