@@ -380,7 +380,10 @@ def test_occlusion_half_to_3s_20_episodes_no_bad_values_and_reacquired():
                             + 2 * REACQUIRE_FRAMES, **COAST_ENV) for i in range(N_EPISODES)]
     for frames in episodes:
         assert_no_bad_values(frames)
-        assert all(not f.est_valid for f in frames if "occlusion" in f.faults and not f.target_visible)
+        # Under the roof the tracker reports the target lost; it may hold on to what is still visible of it
+        # (the visible fraction is then below the threshold but the box overlaps the visible pixels), but a
+        # valid estimate never sits on the roof alone.
+        assert all(not f.est_valid or f.iou > 0.0 for f in frames if "occlusion" in f.faults and not f.target_visible)
     assert _reacquired_fraction(episodes, "occlusion") >= MIN_REACQUIRED_FRACTION
 
 

@@ -28,7 +28,7 @@ from trade_gym.ground_truth import segmentation_boxes
 MIN_MEAN_IOU = 0.8
 BUILDING_MIN_FRACTION = 0.02  # of the ROI crop
 FEATURE_DEPTH_SIGMA_FRAC = 0.05  # converged city ROI depths in closed loop: median |error| ~4 % (sigma ~6 %)
-FAST_SEEDS = (0, 1)
+FAST_SEEDS = (0, 1, 2, 3, 4)
 FAST_FLIGHT_STEPS = 150  # 5 s from the take-off roof: the building is beside the truck
 FAST_FRAME_EVERY = 15  # steps between scored frames (0.5 s)
 CLOSED_LOOP_STEPS = 300
@@ -106,7 +106,7 @@ def test_ground_mask_city_frames_with_building_in_roi_mean_iou_at_least_0_8():
     finally:
         env.close()
     ious = np.array([iou for iou, building in scores if building >= BUILDING_MIN_FRACTION])
-    assert len(ious) >= 6, scores  # the building is in the ROI crop in about half of these frames
+    assert len(ious) >= 6, scores  # the building is in the ROI crop in 7 of the 50 scored frames (5 worlds)
     assert ious.mean() >= MIN_MEAN_IOU, (ious.mean(), scores)
 
 
