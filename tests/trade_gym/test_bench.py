@@ -210,3 +210,12 @@ def test_cli_tiny_oracle_run_writes_schema_valid_outputs_with_timing_apart(tmp_p
     for name in doc["files"]["plots"]:
         assert (tmp_path / "a" / name).stat().st_size > 0
     assert "4 runs in" in capsys.readouterr().out
+
+
+def test_headline_keeps_tables_drops_details_and_plots():
+    from trade_gym.bench.report import headline
+
+    text = "# t\n\n## A\n\n| x |\n|---|\n| 1 |\n\n<details><summary>all</summary>\n\n| y |\n\n</details>\n\n## Plots\n\n![p](p.png)\n"
+    out = headline(text)
+    assert "| x |" in out and "| 1 |" in out
+    assert "| y |" not in out and "p.png" not in out and "<details>" not in out

@@ -171,7 +171,9 @@ def write_outputs(args: argparse.Namespace, results: list[RunResult], argv: Sequ
     document = build_document(results, summary, meta, names, video)
     titles = {g.name: g.title for g in SUITES.get(args.suite or "", ())}
     failures = [f"{r.spec.run_id}: {r.error}" for r in results if r.error]
-    (out / "results.md").write_text(report.render_markdown(summary, meta, titles, failures, names))
+    markdown = report.render_markdown(summary, meta, titles, failures, names)
+    (out / "results.md").write_text(markdown)
+    print(report.headline(markdown))  # the score tables on stdout; progress and errors go to stderr
     write_json(out / "results.json", document)
     _validate_schema(to_json_safe(document))
     return document

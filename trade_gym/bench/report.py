@@ -138,3 +138,19 @@ def render_markdown(summary: Sequence[Record], meta: Record, titles: dict[str, s
     if plots:
         lines += ["## Plots", ""] + [f"![{p}]({p})" for p in plots] + [""]
     return "\n".join(lines)
+
+
+def headline(markdown: str) -> str:
+    """The score tables of a results.md for the terminal: without the collapsed per-configuration details
+    and the plot links."""
+    lines, hidden = [], False
+    for line in markdown.splitlines():
+        if line.startswith("<details>"):
+            hidden = True
+        elif line.startswith("</details>"):
+            hidden = False
+        elif line.startswith("## Plots"):
+            break
+        elif not hidden:
+            lines.append(line)
+    return "\n".join(lines).strip() + "\n"
