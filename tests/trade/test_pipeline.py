@@ -132,11 +132,7 @@ def _pitched_pose(cam_xyz: np.ndarray) -> Pose:
 
 def _render_pitched(scene: PlanarScene, pose: Pose, target_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """RGB (plane homography of the scene's texture with the target pasted) and the true depth (H, W) [m]."""
-    ground = scene.ground.copy()
-    side = scene.target.shape[0]
-    col = int(round(target_xy[0] / TEXTURE_M_PER_PX + TEXTURE_SIDE_PX / 2 - side / 2))
-    row = int(round(target_xy[1] / TEXTURE_M_PER_PX + TEXTURE_SIDE_PX / 2 - side / 2))
-    ground[row:row + side, col:col + side] = scene.target
+    ground = scene.texture_with_target(target_xy)
     K = scene.intrinsics
     x0 = -TEXTURE_SIDE_PX / 2 * TEXTURE_M_PER_PX
     # texture (a, b, 1) -> world (x0 + a s, x0 + b s, 0) - t -> camera R^T (.) -> pixels K (.)
