@@ -6,10 +6,9 @@ source's estimate, so VIO drift reaches the oracle's estimates the way it reache
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
-
-import math
 
 import numpy as np
 
@@ -66,11 +65,10 @@ class OraclePerception:
         self._t_reset_s = self._t_last_s = sensors.t_s
         return self.step(sensors, truth)
 
-    def _unit_noise(self, draws: np.ndarray, t_s: float) -> np.ndarray:
+    def _unit_noise(self, draws: np.ndarray, dt: float) -> np.ndarray:
         """n_k = rho n_{k-1} + sqrt(1 - rho^2) w_k with rho = exp(-dt / tau), w_k ~ N(0, 1): stationary unit
         variance, correlation time tau; white (n_k = w_k) for tau = 0 or at the first frame."""
-        tau, dt = self.config.noise_correlation_s, t_s - self._t_last_s
-        self._t_last_s = t_s
+        tau = self.config.noise_correlation_s
         if self._noise is None or tau <= 0.0:
             self._noise = draws.copy()
         else:
@@ -83,7 +81,8 @@ class OraclePerception:
         # Draw every noise term each frame so the random stream does not depend on visibility.
         draws = self._rng.standard_normal(N_NORMAL_DRAWS)  # one call: box (4), position (3), velocity (3), ground
         dt_s = sensors.t_s - self._t_last_s
-        noise = self._unit_noise(draws[:N_CORRELATED], sensors.t_s)
+        self._t_last_s = sensors.t_s
+        noise = self._unit_noise(draws[:N_CORRELATED], dt_s)
         box_noise = noise[0:4] * cfg.box_sigma_px
         pos_noise = noise[4:7]
         vel_noise = noise[7:10] * cfg.velocity_sigma_mps

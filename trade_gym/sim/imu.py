@@ -165,7 +165,6 @@ class Imu:
         return noise
 
 
-
 def _interpolation_weights(t_truth: FloatArray, t_query: FloatArray) -> FloatArray:
     """(N, M) weights W so that W @ values (M, D) linearly interpolates values given at sorted times
     t_truth (M,) to t_query (N,), held flat outside."""
