@@ -70,6 +70,14 @@ class PipelineConfig:
     # search the constant-image-velocity window too when the prediction is offset from it by more than
     # this fraction of the window
     second_window_offset_fraction: float = 0.25
+    # Re-detection after an untracked frame. A coasting prediction drifts (after 1-3 s under a roof 12-16 px
+    # at 160 px, more than half the 2x-box window), so the windows on a grid of `reacquire_rings` rings
+    # around it, `reacquire_step_fraction` of the window apart, are all searched and the highest peak wins;
+    # it counts as tracked only at `reacquire_min_peak_score` (hysteresis: clutter near the prediction
+    # scores 0.1-0.2 while the target is hidden).
+    reacquire_rings: int = 1
+    reacquire_step_fraction: float = 0.5
+    reacquire_min_peak_score: float = 0.2
     trajectory_preview_s: float = 1.0  # horizon of the predicted trajectory kept for drawing
     trajectory_preview_points: int = 10
 
@@ -86,9 +94,15 @@ class PipelineConfig:
                 raise ValueError(f"PipelineConfig.{name} must be an integer in [3, fusion.buffer_size], got {value!r}")
         if not math.isfinite(self.min_peak_score):
             raise ValueError(f"PipelineConfig.min_peak_score must be finite, got {self.min_peak_score!r}")
-        if not (math.isfinite(self.second_window_offset_fraction) and self.second_window_offset_fraction > 0):
-            raise ValueError("PipelineConfig.second_window_offset_fraction must be finite and > 0, "
-                             f"got {self.second_window_offset_fraction!r}")
+        for name in ("second_window_offset_fraction", "reacquire_step_fraction"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"PipelineConfig.{name} must be finite and > 0, got {value!r}")
+        if int(self.reacquire_rings) != self.reacquire_rings or self.reacquire_rings < 0:
+            raise ValueError(f"PipelineConfig.reacquire_rings must be an integer >= 0, got {self.reacquire_rings!r}")
+        if not math.isfinite(self.reacquire_min_peak_score):
+            raise ValueError("PipelineConfig.reacquire_min_peak_score must be finite, "
+                             f"got {self.reacquire_min_peak_score!r}")
 
 
 @dataclass(frozen=True)
@@ -162,6 +176,10 @@ class TradePipeline:
         self._box: BBox | None = None  # last output box
         self._image_motion_px = np.zeros(2)  # last frame-to-frame shift of the tracked box centre (x, y)
         self._tracked_last = True  # whether the previous frame was tracked (its shift is then current)
+        rings = np.arange(-config.reacquire_rings, config.reacquire_rings + 1)
+        grid = np.stack(np.meshgrid(rings, rings), axis=-1).reshape(-1, 2).astype(np.float64)
+        # (x, y) offsets of the re-detection windows in steps, the centre first
+        self._reacquire_offsets = grid[np.argsort(np.abs(grid).max(axis=1), kind="stable")]
         self.trajectory = TrajectoryModel(config.trajectory)
         self.roi = RoiFeatureTracker(config.roi, intrinsics)
         self._min_plane_points = config.min_masked_plane_points if config.ground_mask else config.min_plane_points
@@ -212,8 +230,12 @@ class TradePipeline:
         self._t_s = t_s
         start = time.perf_counter()
         predicted_px = self._predict_pixel(t_s, T_world_cam)
-        choice, scale = self._choose_peak(image_rgb, predicted_px)
-        tracked = choice.score >= self.config.min_peak_score or not self.config.trajectory_guidance
+        if self._tracked_last or not self.config.trajectory_guidance:
+            choice, scale = self._choose_peak(image_rgb, predicted_px)
+            tracked = choice.score >= self.config.min_peak_score or not self.config.trajectory_guidance
+        else:
+            centre_px = predicted_px if self._in_image(predicted_px) else self.tracker.box.center
+            choice, scale, tracked = self._redetect(image_rgb, centre_px)
         if tracked:
             previous_px = self.tracker.box.center
             dcf_box = self.tracker.commit(choice.location_px, scale)
@@ -251,8 +273,7 @@ class TradePipeline:
         guided = self._in_image(predicted_px)
         motion_px = last_px + self._image_motion_px  # where constant image velocity puts the target
         choice, scale = self._select(image_rgb, predicted_px if guided else motion_px)
-        # only while tracking: after an untracked frame the box's last shift says nothing about the target
-        if not (guided and self._tracked_last and self._far_apart(predicted_px, motion_px)):
+        if not (guided and self._far_apart(predicted_px, motion_px)):
             return choice, scale
         # The prediction is only as good as the 3D estimate behind it (e.g. a roof taken for the ground
         # puts the target at a wrong depth and the prediction drifts off it). When it has moved the
@@ -264,6 +285,30 @@ class TradePipeline:
         if alt.score - choice.score > peaks.softmax_temperature * math.log(1.0 / peaks.candidate_fraction):
             return alt, alt_scale
         return choice, scale
+
+    def _redetect(self, image_rgb: npt.NDArray[np.uint8], centre_px: FloatArray) -> tuple[PeakChoice, float, bool]:
+        """While lost. Candidates: the paper's peak in the window at `centre_px` (the prediction), then the
+        top peaks of the other windows on the grid around it, highest first. The first that scores at least
+        reacquire_min_peak_score and whose colour blob passes the refiner's tests is taken (tracked); with
+        none, the prediction window's peak (not tracked). Returns the choice, its DSST scale, whether tracked."""
+        cfg, box = self.config, self.tracker.box
+        step_px = cfg.reacquire_step_fraction * cfg.dcf.padding * np.array([box.w_px, box.h_px])
+        centre_response = self.tracker.response(image_rgb, centre_px, with_scale=False)
+        guided = select_peak(centre_response, cfg.peaks)
+        others = [highest_peak(centre_response, cfg.peaks)]
+        for offset in self._reacquire_offsets[1:]:  # [0] is the centre window
+            centre = centre_px + offset * step_px
+            if self._in_image(centre):
+                others.append(highest_peak(self.tracker.response(image_rgb, centre, with_scale=False), cfg.peaks))
+        for choice in [guided, *sorted(others, key=lambda c: -c.score)]:
+            if choice.score >= cfg.reacquire_min_peak_score and self._colour_confirms(image_rgb, choice.location_px):
+                return choice, self.tracker.estimate_scale(image_rgb, choice.location_px), True
+        return guided, 1.0, False
+
+    def _colour_confirms(self, image_rgb: npt.NDArray[np.uint8], location_px: FloatArray) -> bool:
+        """Whether the target's colour model finds a plausible blob of the target's size at `location_px`."""
+        refinement = self.refiner.refine(image_rgb, location_px, self._box, size_reference=self.tracker.box)
+        return refinement is not None and refinement.accepted
 
     def _select(self, image_rgb: npt.NDArray[np.uint8], centre_px: FloatArray) -> tuple[PeakChoice, float]:
         """The paper's peak choice in the window centred at `centre_px`, and the DSST scale there."""

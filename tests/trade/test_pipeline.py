@@ -177,7 +177,7 @@ def test_pipeline_ground_mask_target_never_found_fits_no_plane():
     scene = PlanarScene.make(size_px=128, fov_deg=90.0, seed=0)
     model = _ExactInverseDepth()
     model.depth_m = np.full((128, 128), ALTITUDE_M)
-    config = PipelineConfig(ground_mask=True, min_peak_score=2.0)  # scores are <= 1: never tracked
+    config = PipelineConfig(ground_mask=True, min_peak_score=2.0, reacquire_min_peak_score=2.0)  # scores <= 1: never tracked
     pipeline = TradePipeline(config, scene.intrinsics, np.random.default_rng(0), model)
     for k in range(45):
         t = k / FPS
@@ -194,3 +194,57 @@ def test_pipeline_ground_mask_without_depth_model_is_refused():
     scene = PlanarScene.make(size_px=64)
     with pytest.raises(ValueError, match="depth model"):
         TradePipeline(PipelineConfig(ground_mask=True), scene.intrinsics, np.random.default_rng(0))
+
+
+OCCLUDE_AT_FRAME = 45
+OCCLUDED_FRAMES = 40
+OCCLUDER_SCALE = 1.5  # the grey patch covers the target's box scaled by this
+OCCLUDER_GREY = 128
+
+
+def _turning_target_xy(k: int) -> np.ndarray:
+    """Along +x at 2.2 m/s, then back at the same speed from the moment it is occluded."""
+    t, t_turn = k / FPS, OCCLUDE_AT_FRAME / FPS
+    return np.array([-3.0 + 2.2 * min(t, t_turn) - 2.2 * max(0.0, t - t_turn), -1.0])
+
+
+def _occluded_turn(config: PipelineConfig) -> list[tuple[bool, bool, float, np.ndarray, np.ndarray]]:
+    """(occluded, tracked, IoU, predicted px, true centre px) per frame of a sequence in which the target
+    turns back while a grey patch hides it, so the coasting prediction ends up ahead of it."""
+    scene = PlanarScene.make(size_px=128, fov_deg=90.0, seed=0)
+    pipeline = TradePipeline(config, scene.intrinsics, np.random.default_rng(0))
+    records = []
+    for k in range(OCCLUDE_AT_FRAME + OCCLUDED_FRAMES + 10):
+        cam = np.array([0.0, 0.0, ALTITUDE_M]) + np.array([1.0, 0.0, 0.0]) * k / FPS
+        tgt = _turning_target_xy(k)
+        image, pose, gt = scene.render(cam, tgt), scene.camera_pose(cam), scene.target_box(cam, tgt)
+        occluded = OCCLUDE_AT_FRAME <= k < OCCLUDE_AT_FRAME + OCCLUDED_FRAMES
+        centre = gt[:2] + gt[2:] / 2
+        if occluded:
+            lo = np.floor(centre - OCCLUDER_SCALE * gt[2:] / 2).clip(0).astype(int)
+            hi = np.ceil(centre + OCCLUDER_SCALE * gt[2:] / 2).astype(int)
+            image[lo[1]:hi[1], lo[0]:hi[0]] = OCCLUDER_GREY
+        est = pipeline.initialise(image, BBox.from_array(gt), pose, k / FPS) if k == 0 else pipeline.step(image, pose, k / FPS)
+        records.append((occluded, est.tracked, iou(est.box.as_array(), gt) if est.box is not None else 0.0,
+                        est.predicted_px, centre))
+    return records
+
+
+def test_pipeline_redetects_target_away_from_the_coasting_prediction_after_occlusion():
+    """After 40 occluded frames the prediction is > half a search window off the target; the grid of
+    windows around it finds the target on the first frame it is back, the prediction's window alone never."""
+    records = _occluded_turn(PipelineConfig(object_height_m=0.0))
+    back = OCCLUDE_AT_FRAME + OCCLUDED_FRAMES
+    _, _, _, predicted, centre = records[back]
+    assert np.linalg.norm(predicted - centre) > 20.0  # the box is ~17 px, its search window ~34 px
+    assert not any(tracked for occluded, tracked, _, _, _ in records if occluded)  # nothing else taken meanwhile
+    assert all(tracked and overlap >= 0.5 for _, tracked, overlap, _, _ in records[back:])
+    single_window = _occluded_turn(PipelineConfig(object_height_m=0.0, reacquire_rings=0))
+    assert not any(tracked for _, tracked, _, _, _ in single_window[back:])
+
+
+@pytest.mark.parametrize("field, value", [("reacquire_rings", -1), ("reacquire_rings", 1.5),
+                                          ("reacquire_step_fraction", 0.0), ("reacquire_min_peak_score", np.nan)])
+def test_pipeline_config_rejects_bad_reacquisition_settings(field, value):
+    with pytest.raises(ValueError, match=field):
+        PipelineConfig(**{field: value})

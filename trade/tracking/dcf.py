@@ -119,11 +119,11 @@ class DcfTracker:
         features = extract_features(patch, self.config.features).transpose(2, 0, 1)  # (C, h, w)
         return np.fft.rfft2(features * self._cos_window)
 
-    def response(self, image_rgb: ImageRGB, search_center_px: npt.ArrayLike) -> ResponseMap:
+    def response(self, image_rgb: ImageRGB, search_center_px: npt.ArrayLike, with_scale: bool = True) -> ResponseMap:
         """Score map of the window (padding x current box) centred on `search_center_px` (x, y) [px].
 
         The map's cells are displacements of the target from the search centre; `scale` is the
-        DSST size factor at the highest peak (1 when scale estimation is off).
+        DSST size factor at the highest peak (1 when scale estimation is off or `with_scale` is False).
         """
         cfg = self.config
         box = self.box
@@ -139,7 +139,7 @@ class DcfTracker:
             origin_px=center,
             px_per_cell=window / np.array(self._cells_wh),
         )
-        if not cfg.estimate_scale:
+        if not (cfg.estimate_scale and with_scale):
             return resp
         peak_rc = refine_peak(resp.scores, np.unravel_index(int(np.argmax(resp.scores)), resp.scores.shape))
         return replace(resp, scale=self.estimate_scale(image_rgb, resp.cell_to_image_px(peak_rc)))
