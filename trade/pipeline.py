@@ -51,6 +51,15 @@ class PipelineConfig:
     depth_only: DepthOnlyConfig = field(default_factory=DepthOnlyConfig)
     trajectory_guidance: bool = True  # False: the "dcf" baseline (window on the last box, top peak)
     box_refinement: bool = True  # fit the box to the target's colour blob (the DCF keeps its aspect)
+    # Snap the initial box to the colour blob at its centre before the tracker learns from it. A box
+    # drawn (or perturbed, as in the paper's protocol) a few px off a small target otherwise teaches the
+    # DCF a template that is half ground, which then holds on to the ground (desert, 256 px: +-5 px is
+    # half the car's width).
+    snap_initial_box: bool = True
+    snap_iterations: int = 2  # colour relearning passes of the snap before its blob is judged
+    # the snapped box's width and height must each lie within this factor of the given box's (a blob that
+    # merges with a neighbour or keeps a sliver is not the target)
+    snap_max_side_ratio: float = 1.4
     temporal_fusion: bool = True
     ground_mask: bool = False  # plane fit only on tracks the single-image-depth ground mask keeps
     # Depth-only mode of the paper's Table 2: the target depth read from the aligned single-image depth map
@@ -88,12 +97,16 @@ class PipelineConfig:
                              f"ground_mask={self.ground_mask!r}")
         if not (math.isfinite(self.object_height_m) and self.object_height_m >= 0):
             raise ValueError(f"PipelineConfig.object_height_m must be finite and >= 0, got {self.object_height_m!r}")
+        if int(self.snap_iterations) != self.snap_iterations or self.snap_iterations < 0:
+            raise ValueError(f"PipelineConfig.snap_iterations must be an integer >= 0, got {self.snap_iterations!r}")
         for name in ("min_plane_points", "min_masked_plane_points"):
             value = getattr(self, name)
             if int(value) != value or not 3 <= value <= self.fusion.buffer_size:
                 raise ValueError(f"PipelineConfig.{name} must be an integer in [3, fusion.buffer_size], got {value!r}")
         if not math.isfinite(self.min_peak_score):
             raise ValueError(f"PipelineConfig.min_peak_score must be finite, got {self.min_peak_score!r}")
+        if not (math.isfinite(self.snap_max_side_ratio) and self.snap_max_side_ratio >= 1.0):
+            raise ValueError(f"PipelineConfig.snap_max_side_ratio must be finite and >= 1, got {self.snap_max_side_ratio!r}")
         for name in ("second_window_offset_fraction", "reacquire_step_fraction"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -197,8 +210,10 @@ class TradePipeline:
     def initialise(self, image_rgb: npt.NDArray[np.uint8], box: BBox, T_world_cam: Pose, t_s: float) -> Estimate:
         """Start tracking `box` (x, y, w, h) [px] in `image_rgb` (H, W, 3) uint8 at time t_s."""
         self._check_image(image_rgb)
-        self.tracker.init(image_rgb, box)
         self.refiner.init(image_rgb, box)
+        if self.config.snap_initial_box:
+            box = self._snapped(image_rgb, box)
+        self.tracker.init(image_rgb, box)
         self._box = box
         self._image_motion_px = np.zeros(2)
         self._tracked_last = True
@@ -257,6 +272,26 @@ class TradePipeline:
                               predicted_px, roi, T_world_cam, StageTimings(tracker_ms=tracker_ms, roi_ms=roi_ms))
 
     # ------------------------------------------------------------------ stages
+    def _snapped(self, image_rgb: npt.NDArray[np.uint8], box: BBox) -> BBox:
+        """The colour blob at the given box's centre, with the colours relearnt from the blob
+        `snap_iterations` times (a box a few px off mixes ground into the first model, and the blob's
+        contrast is then too low to accept); the blob's tight box when the refiner accepts the last one
+        (colours learnt from it), else the given box (colours learnt from it)."""
+        candidate = box
+        for _ in range(self.config.snap_iterations):
+            refinement = self.refiner.refine(image_rgb, candidate.center, box, size_reference=box)
+            if refinement is None:
+                break
+            candidate = refinement.box
+            self.refiner.init(image_rgb, candidate)
+        final = self.refiner.refine(image_rgb, candidate.center, box, size_reference=box)
+        sides = np.array([final.box.w_px / box.w_px, final.box.h_px / box.h_px]) if final is not None else None
+        ratio = self.config.snap_max_side_ratio
+        plausible = sides is not None and final.accepted and bool(np.all((sides <= ratio) & (sides >= 1.0 / ratio)))
+        snapped = final.box if plausible else box
+        self.refiner.init(image_rgb, snapped)
+        return snapped
+
     def _predict_pixel(self, t_s: float, T_world_cam: Pose) -> FloatArray:
         """Advance the trajectory model to t_s and project its position; NaN when unavailable."""
         if not self.trajectory.initialized:

@@ -243,8 +243,33 @@ def test_pipeline_redetects_target_away_from_the_coasting_prediction_after_occlu
     assert not any(tracked for _, tracked, _, _, _ in single_window[back:])
 
 
-@pytest.mark.parametrize("field, value", [("reacquire_rings", -1), ("reacquire_rings", 1.5),
+@pytest.mark.parametrize("field, value", [("reacquire_rings", -1), ("reacquire_rings", 1.5), ("snap_iterations", -1),
+                                          ("snap_max_side_ratio", 0.9),
                                           ("reacquire_step_fraction", 0.0), ("reacquire_min_peak_score", np.nan)])
-def test_pipeline_config_rejects_bad_reacquisition_settings(field, value):
+def test_pipeline_config_rejects_bad_reacquisition_and_snap_settings(field, value):
     with pytest.raises(ValueError, match=field):
         PipelineConfig(**{field: value})
+
+
+def test_pipeline_snaps_an_initial_box_drawn_off_the_target_to_it():
+    """A box drawn 4 px right and 3 px up of a ~17 px target (the paper's protocol perturbs it within 5 px)
+    is snapped to the target's colour blob before the tracker learns its template; unsnapped it stays off."""
+    scene = PlanarScene.make(size_px=128, fov_deg=90.0, seed=0)
+    cam, tgt = np.array([0.0, 0.0, ALTITUDE_M]), np.array([1.0, -1.0])
+    image, pose, gt = scene.render(cam, tgt), scene.camera_pose(cam), scene.target_box(cam, tgt)
+    drawn = BBox.from_array(gt + np.array([4.0, -3.0, 0.0, 0.0]))
+    snapped = TradePipeline(PipelineConfig(), scene.intrinsics, np.random.default_rng(0))
+    assert iou(snapped.initialise(image, drawn, pose, 0.0).box.as_array(), gt) >= 0.85
+    assert iou(snapped.tracker.box.as_array(), gt) >= 0.85
+    kept = TradePipeline(PipelineConfig(snap_initial_box=False), scene.intrinsics, np.random.default_rng(0))
+    assert kept.initialise(image, drawn, pose, 0.0).box == drawn
+
+
+def test_pipeline_keeps_the_initial_box_where_no_plausible_blob_is():
+    """On plain ground (no target under the box) the snap finds no blob it accepts and keeps the box."""
+    scene = PlanarScene.make(size_px=128, fov_deg=90.0, seed=0)
+    cam = np.array([0.0, 0.0, ALTITUDE_M])
+    image = scene.render(cam, np.array([40.0, 40.0]))  # the target outside the view
+    drawn = BBox(50.0, 50.0, 17.0, 17.0)
+    pipeline = TradePipeline(PipelineConfig(), scene.intrinsics, np.random.default_rng(0))
+    assert pipeline.initialise(image, drawn, scene.camera_pose(cam), 0.0).box == drawn
