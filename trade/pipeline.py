@@ -80,10 +80,10 @@ class PipelineConfig:
     # this fraction of the window
     second_window_offset_fraction: float = 0.25
     # Re-detection after an untracked frame. A coasting prediction drifts (after 1-3 s under a roof 12-16 px
-    # at 160 px, more than half the 2x-box window), so the windows on a grid of `reacquire_rings` rings
-    # around it, `reacquire_step_fraction` of the window apart, are all searched and the highest peak wins;
-    # it counts as tracked only at `reacquire_min_peak_score` (hysteresis: clutter near the prediction
-    # scores 0.1-0.2 while the target is hidden).
+    # at 160 px, more than half the 2x-box window), so besides the prediction's window the windows on a grid
+    # of `reacquire_rings` rings around it, `reacquire_step_fraction` of the window apart, are searched. A
+    # peak is taken back only at `reacquire_min_peak_score` (hysteresis: clutter near the prediction scores
+    # 0.1-0.2 while the target is hidden) and where the colour model finds the target's blob.
     reacquire_rings: int = 1
     reacquire_step_fraction: float = 0.5
     reacquire_min_peak_score: float = 0.2
@@ -285,12 +285,15 @@ class TradePipeline:
             candidate = refinement.box
             self.refiner.init(image_rgb, candidate)
         final = self.refiner.refine(image_rgb, candidate.center, box, size_reference=box)
-        sides = np.array([final.box.w_px / box.w_px, final.box.h_px / box.h_px]) if final is not None else None
-        ratio = self.config.snap_max_side_ratio
-        plausible = sides is not None and final.accepted and bool(np.all((sides <= ratio) & (sides >= 1.0 / ratio)))
-        snapped = final.box if plausible else box
+        snapped = final.box if final is not None and final.accepted and self._similar_size(final.box, box) else box
         self.refiner.init(image_rgb, snapped)
         return snapped
+
+    def _similar_size(self, box: BBox, reference: BBox) -> bool:
+        """Whether width and height each lie within snap_max_side_ratio of the reference's."""
+        ratio = self.config.snap_max_side_ratio
+        sides = np.array([box.w_px / reference.w_px, box.h_px / reference.h_px])
+        return bool(np.all((sides <= ratio) & (sides >= 1.0 / ratio)))
 
     def _predict_pixel(self, t_s: float, T_world_cam: Pose) -> FloatArray:
         """Advance the trajectory model to t_s and project its position; NaN when unavailable."""
