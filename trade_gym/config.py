@@ -41,6 +41,7 @@ class EnvConfig:
     trajectory_guidance: bool = True
     init_box_perturb_px: float = 0.0  # uniform perturbation of the initial box [px]
     init_frame_shift_max: int = 0  # start tracking after 0..N frames, drawn per episode
+    snap_init_box: bool = False  # the stack snaps the initial box to the target's colour blob (for a rough box)
     # None: each reset's seed draws the world too. An int fixes the world (the "sequence") while the
     # reset seed still drives sensor noise, the start shift and the box perturbation (repeated runs).
     world_seed: int | None = None

@@ -71,7 +71,8 @@ class TradeFollowEnv(gym.Env):
     ## Starting State
     The drone hovers at the scene's follow height with the target in view; tracking starts from
     the ground-truth box, optionally shifted by up to `init_frame_shift_max` frames and perturbed by
-    `init_box_perturb_px`.
+    `init_box_perturb_px`; with `snap_init_box` the TRADE stack snaps the box it is given to the
+    target's colour blob.
 
     ## Episode End
     Terminated on a crash into terrain or buildings, or when the target has been out of view for

@@ -258,10 +258,10 @@ def test_pipeline_snaps_an_initial_box_drawn_off_the_target_to_it():
     cam, tgt = np.array([0.0, 0.0, ALTITUDE_M]), np.array([1.0, -1.0])
     image, pose, gt = scene.render(cam, tgt), scene.camera_pose(cam), scene.target_box(cam, tgt)
     drawn = BBox.from_array(gt + np.array([4.0, -3.0, 0.0, 0.0]))
-    snapped = TradePipeline(PipelineConfig(), scene.intrinsics, np.random.default_rng(0))
+    snapped = TradePipeline(PipelineConfig(snap_initial_box=True), scene.intrinsics, np.random.default_rng(0))
     assert iou(snapped.initialise(image, drawn, pose, 0.0).box.as_array(), gt) >= 0.85
     assert iou(snapped.tracker.box.as_array(), gt) >= 0.85
-    kept = TradePipeline(PipelineConfig(snap_initial_box=False), scene.intrinsics, np.random.default_rng(0))
+    kept = TradePipeline(PipelineConfig(), scene.intrinsics, np.random.default_rng(0))  # off by default
     assert kept.initialise(image, drawn, pose, 0.0).box == drawn
 
 
@@ -271,5 +271,5 @@ def test_pipeline_keeps_the_initial_box_where_no_plausible_blob_is():
     cam = np.array([0.0, 0.0, ALTITUDE_M])
     image = scene.render(cam, np.array([40.0, 40.0]))  # the target outside the view
     drawn = BBox(50.0, 50.0, 17.0, 17.0)
-    pipeline = TradePipeline(PipelineConfig(), scene.intrinsics, np.random.default_rng(0))
+    pipeline = TradePipeline(PipelineConfig(snap_initial_box=True), scene.intrinsics, np.random.default_rng(0))
     assert pipeline.initialise(image, drawn, scene.camera_pose(cam), 0.0).box == drawn

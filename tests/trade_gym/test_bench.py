@@ -89,7 +89,7 @@ def test_paper_suite_follows_protocol_and_run_counts():
     assert len(by_group["tracking"]) == 3 * 2 * 10  # scenes x (trade, dcf) x 10 runs
     for r in runs:
         kw = r.env_kwargs()
-        assert kw["init_frame_shift_max"] == 10 and kw["init_box_perturb_px"] == 5.0
+        assert kw["init_frame_shift_max"] == 10 and kw["init_box_perturb_px"] == 5.0 and kw["snap_init_box"]
     assert all(r.env_kwargs()["single_image_depth"] for r in by_group["table2"])
     assert {r.switch_value("depth_only_ransac") for r in by_group["table2"]} == {False, True}
     assert {r.pose_source for r in by_group["tracking"]} == {"vio"}

@@ -44,6 +44,7 @@ def pipeline_config(config: EnvConfig) -> PipelineConfig:
         ground_mask=config.ground_mask,
         single_image_depth=config.single_image_depth,
         depth_alignment_ransac=config.depth_only_ransac,
+        snap_initial_box=config.snap_init_box,
     )
 
 
