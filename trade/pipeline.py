@@ -22,9 +22,10 @@ from trade.planes import MultiRansacConfig, Plane, multi_ransac
 from trade.raycast import RaycastConfig, depth_uncertainty, raycast_plane
 from trade.roi_features import RoiConfig, RoiFeatures, RoiFeatureTracker
 from trade.temporal_fusion import TemporalFusionConfig, TemporalPlaneFusion
-from trade.tracking.colour_box import ColourBoxConfig, ColourBoxRefiner
+from trade.tracking.colour_box import ColourBoxConfig
 from trade.tracking.dcf import DcfConfig, DcfTracker
-from trade.tracking.peaks import PeakChoice, PeakConfig, highest_peak, select_peak
+from trade.tracking.guided import GuidedTracker
+from trade.tracking.peaks import PeakConfig
 from trade.trajectory import TrajectoryConfig, TrajectoryModel
 from trade.types import BBox, ImuBatch
 
@@ -98,25 +99,23 @@ class PipelineConfig:
                              f"ground_mask={self.ground_mask!r}")
         if not (math.isfinite(self.object_height_m) and self.object_height_m >= 0):
             raise ValueError(f"PipelineConfig.object_height_m must be finite and >= 0, got {self.object_height_m!r}")
-        if int(self.snap_iterations) != self.snap_iterations or self.snap_iterations < 0:
-            raise ValueError(f"PipelineConfig.snap_iterations must be an integer >= 0, got {self.snap_iterations!r}")
+        for name in ("snap_iterations", "reacquire_rings"):
+            value = getattr(self, name)
+            if int(value) != value or value < 0:
+                raise ValueError(f"PipelineConfig.{name} must be an integer >= 0, got {value!r}")
         for name in ("min_plane_points", "min_masked_plane_points"):
             value = getattr(self, name)
             if int(value) != value or not 3 <= value <= self.fusion.buffer_size:
                 raise ValueError(f"PipelineConfig.{name} must be an integer in [3, fusion.buffer_size], got {value!r}")
-        if not math.isfinite(self.min_peak_score):
-            raise ValueError(f"PipelineConfig.min_peak_score must be finite, got {self.min_peak_score!r}")
+        for name in ("min_peak_score", "reacquire_min_peak_score"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"PipelineConfig.{name} must be finite, got {getattr(self, name)!r}")
         if not (math.isfinite(self.snap_max_side_ratio) and self.snap_max_side_ratio >= 1.0):
             raise ValueError(f"PipelineConfig.snap_max_side_ratio must be finite and >= 1, got {self.snap_max_side_ratio!r}")
         for name in ("second_window_offset_fraction", "reacquire_step_fraction"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"PipelineConfig.{name} must be finite and > 0, got {value!r}")
-        if int(self.reacquire_rings) != self.reacquire_rings or self.reacquire_rings < 0:
-            raise ValueError(f"PipelineConfig.reacquire_rings must be an integer >= 0, got {self.reacquire_rings!r}")
-        if not math.isfinite(self.reacquire_min_peak_score):
-            raise ValueError("PipelineConfig.reacquire_min_peak_score must be finite, "
-                             f"got {self.reacquire_min_peak_score!r}")
 
 
 @dataclass(frozen=True)
@@ -185,15 +184,7 @@ class TradePipeline:
         self.config = config
         self.intrinsics = intrinsics
         self._rng = rng
-        self.tracker = DcfTracker(config.dcf)
-        self.refiner = ColourBoxRefiner(config.colour_box)
-        self._box: BBox | None = None  # last output box
-        self._image_motion_px = np.zeros(2)  # last frame-to-frame shift of the tracked box centre (x, y)
-        self._tracked_last = True  # whether the previous frame was tracked (its shift is then current)
-        rings = np.arange(-config.reacquire_rings, config.reacquire_rings + 1)
-        grid = np.stack(np.meshgrid(rings, rings), axis=-1).reshape(-1, 2).astype(np.float64)
-        # (x, y) offsets of the re-detection windows in steps, the centre first
-        self._reacquire_offsets = grid[np.argsort(np.abs(grid).max(axis=1), kind="stable")]
+        self.tracking = GuidedTracker(config)
         self.trajectory = TrajectoryModel(config.trajectory)
         self.roi = RoiFeatureTracker(config.roi, intrinsics)
         self._min_plane_points = config.min_masked_plane_points if config.ground_mask else config.min_plane_points
@@ -208,16 +199,15 @@ class TradePipeline:
         self._t_s = 0.0
         self._initialised = False
 
+    @property
+    def tracker(self) -> DcfTracker:
+        """The correlation filter (its committed box)."""
+        return self.tracking.dcf
+
     def initialise(self, image_rgb: npt.NDArray[np.uint8], box: BBox, T_world_cam: Pose, t_s: float) -> Estimate:
         """Start tracking `box` (x, y, w, h) [px] in `image_rgb` (H, W, 3) uint8 at time t_s."""
         self._check_image(image_rgb)
-        self.refiner.init(image_rgb, box)
-        if self.config.snap_initial_box:
-            box = self._snapped(image_rgb, box)
-        self.tracker.init(image_rgb, box)
-        self._box = box
-        self._image_motion_px = np.zeros(2)
-        self._tracked_last = True
+        box = self.tracking.init(image_rgb, box)
         self.trajectory = TrajectoryModel(self.config.trajectory)
         self.roi.reset()
         self.fusion.reset()
@@ -246,25 +236,8 @@ class TradePipeline:
         self._t_s = t_s
         start = time.perf_counter()
         predicted_px = self._predict_pixel(t_s, T_world_cam)
-        if self._tracked_last or not self.config.trajectory_guidance:
-            choice, scale = self._choose_peak(image_rgb, predicted_px)
-            tracked = choice.score >= self.config.min_peak_score or not self.config.trajectory_guidance
-        else:
-            centre_px = predicted_px if self._in_image(predicted_px) else self.tracker.box.center
-            choice, scale, tracked = self._redetect(image_rgb, centre_px)
-        if tracked:
-            previous_px = self.tracker.box.center
-            dcf_box = self.tracker.commit(choice.location_px, scale)
-            self._image_motion_px = dcf_box.center - previous_px
-            if not choice.ambiguous:
-                self.tracker.update(image_rgb)
-            box = self._refine_box(image_rgb, dcf_box, learn=not choice.ambiguous)
-        else:
-            box = self._coast_box(predicted_px)
-            # the last shift is stale once a frame goes untracked: no constant-image-velocity guess
-            self._image_motion_px = np.zeros(2)
-        self._tracked_last = tracked
-        self._box = box
+        frame = self.tracking.step(image_rgb, predicted_px)
+        box, choice, tracked = frame.box, frame.choice, frame.tracked
         tracker_ms = (time.perf_counter() - start) * 1e3
         start = time.perf_counter()
         roi = self.roi.step(cv2.cvtColor(image_rgb, cv2.COLOR_RGB2GRAY), box, T_world_cam)
@@ -273,29 +246,6 @@ class TradePipeline:
                               predicted_px, roi, T_world_cam, StageTimings(tracker_ms=tracker_ms, roi_ms=roi_ms))
 
     # ------------------------------------------------------------------ stages
-    def _snapped(self, image_rgb: npt.NDArray[np.uint8], box: BBox) -> BBox:
-        """The colour blob at the given box's centre, with the colours relearnt from the blob
-        `snap_iterations` times (a box a few px off mixes ground into the first model, and the blob's
-        contrast is then too low to accept); the blob's tight box when the refiner accepts the last one
-        (colours learnt from it), else the given box (colours learnt from it)."""
-        candidate = box
-        for _ in range(self.config.snap_iterations):
-            refinement = self.refiner.refine(image_rgb, candidate.center, box, size_reference=box)
-            if refinement is None:
-                break
-            candidate = refinement.box
-            self.refiner.init(image_rgb, candidate)
-        final = self.refiner.refine(image_rgb, candidate.center, box, size_reference=box)
-        snapped = final.box if final is not None and final.accepted and self._similar_size(final.box, box) else box
-        self.refiner.init(image_rgb, snapped)
-        return snapped
-
-    def _similar_size(self, box: BBox, reference: BBox) -> bool:
-        """Whether width and height each lie within snap_max_side_ratio of the reference's."""
-        ratio = self.config.snap_max_side_ratio
-        sides = np.array([box.w_px / reference.w_px, box.h_px / reference.h_px])
-        return bool(np.all((sides <= ratio) & (sides >= 1.0 / ratio)))
-
     def _predict_pixel(self, t_s: float, T_world_cam: Pose) -> FloatArray:
         """Advance the trajectory model to t_s and project its position; NaN when unavailable."""
         if not self.trajectory.initialized:
@@ -303,88 +253,6 @@ class TradePipeline:
         state = self.trajectory.predict(t_s)
         uv = self.intrinsics.project(T_world_cam.inverse().apply(state.position_m.reshape(1, 3)))[0]
         return uv
-
-    def _choose_peak(self, image_rgb: npt.NDArray[np.uint8], predicted_px: FloatArray) -> tuple[PeakChoice, float]:
-        last_px = self.tracker.box.center
-        if not self.config.trajectory_guidance:
-            response = self.tracker.response(image_rgb, last_px)
-            return highest_peak(response, self.config.peaks), response.scale
-        guided = self._in_image(predicted_px)
-        motion_px = last_px + self._image_motion_px  # where constant image velocity puts the target
-        choice, scale = self._select(image_rgb, predicted_px if guided else motion_px)
-        if not (guided and self._far_apart(predicted_px, motion_px)):
-            return choice, scale
-        # The prediction is only as good as the 3D estimate behind it (e.g. a roof taken for the ground
-        # puts the target at a wrong depth and the prediction drifts off it). When it has moved the
-        # window far from where the box's last image shift (constant image velocity) puts the target,
-        # search there too and keep that peak if the prediction's would not even be a candidate beside
-        # it (softmax ratio below candidate_fraction): s_motion - s_pred > T ln(1 / candidate_fraction).
-        alt, alt_scale = self._select(image_rgb, motion_px)
-        peaks = self.config.peaks
-        if alt.score - choice.score > peaks.softmax_temperature * math.log(1.0 / peaks.candidate_fraction):
-            return alt, alt_scale
-        return choice, scale
-
-    def _redetect(self, image_rgb: npt.NDArray[np.uint8], centre_px: FloatArray) -> tuple[PeakChoice, float, bool]:
-        """While lost. Candidates: the paper's peak in the window at `centre_px` (the prediction), then the
-        top peaks of the other windows on the grid around it, highest first. The first that scores at least
-        reacquire_min_peak_score and whose colour blob passes the refiner's tests is taken (tracked); with
-        none, the prediction window's peak (not tracked). Returns the choice, its DSST scale, whether tracked."""
-        cfg, box = self.config, self.tracker.box
-        step_px = cfg.reacquire_step_fraction * cfg.dcf.padding * np.array([box.w_px, box.h_px])
-        centre_response = self.tracker.response(image_rgb, centre_px, with_scale=False)
-        guided = select_peak(centre_response, cfg.peaks)
-        others = [highest_peak(centre_response, cfg.peaks)]
-        for offset in self._reacquire_offsets[1:]:  # [0] is the centre window
-            centre = centre_px + offset * step_px
-            if self._in_image(centre):
-                others.append(highest_peak(self.tracker.response(image_rgb, centre, with_scale=False), cfg.peaks))
-        for choice in [guided, *sorted(others, key=lambda c: -c.score)]:
-            if choice.score >= cfg.reacquire_min_peak_score and self._colour_confirms(image_rgb, choice.location_px):
-                return choice, self.tracker.estimate_scale(image_rgb, choice.location_px), True
-        return guided, 1.0, False
-
-    def _colour_confirms(self, image_rgb: npt.NDArray[np.uint8], location_px: FloatArray) -> bool:
-        """Whether the target's colour model finds a plausible blob of the target's size at `location_px`."""
-        refinement = self.refiner.refine(image_rgb, location_px, self._box, size_reference=self.tracker.box)
-        return refinement is not None and refinement.accepted
-
-    def _select(self, image_rgb: npt.NDArray[np.uint8], centre_px: FloatArray) -> tuple[PeakChoice, float]:
-        """The paper's peak choice in the window centred at `centre_px`, and the DSST scale there."""
-        response = self.tracker.response(image_rgb, centre_px)
-        choice = select_peak(response, self.config.peaks)
-        # response.scale was estimated at the highest peak; re-estimate only when another peak won
-        if choice.score < float(response.scores.max()):
-            return choice, self.tracker.estimate_scale(image_rgb, choice.location_px)
-        return choice, response.scale
-
-    def _far_apart(self, predicted_px: FloatArray, motion_px: FloatArray) -> bool:
-        """Whether the trajectory prediction is offset from the constant-image-velocity one by more than
-        `second_window_offset_fraction` of the search window along either axis."""
-        box, fraction = self.tracker.box, self.config.second_window_offset_fraction
-        window = self.config.dcf.padding * np.array([box.w_px, box.h_px])
-        return bool(np.any(np.abs(np.asarray(predicted_px) - motion_px) > fraction * window))
-
-    def _refine_box(self, image_rgb: npt.NDArray[np.uint8], dcf_box: BBox, learn: bool) -> BBox:
-        """The output box: the target's colour blob around the DCF centre when that blob is plausible,
-        else the last output size centred on the DCF location."""
-        centre = dcf_box.center
-        fallback = BBox.from_center(centre[0], centre[1], self._box.w_px, self._box.h_px)
-        if not self.config.box_refinement:
-            return dcf_box
-        refinement = self.refiner.refine(image_rgb, centre, self._box, size_reference=dcf_box)
-        if refinement is None or not refinement.accepted:
-            return fallback
-        if learn:
-            self.refiner.update(image_rgb, refinement)
-        return refinement.box
-
-    def _coast_box(self, predicted_px: FloatArray) -> BBox:
-        """While lost, the box follows the trajectory prediction with its last size."""
-        last = self._box
-        if not self._in_image(predicted_px):
-            return last
-        return BBox.from_center(predicted_px[0], predicted_px[1], last.w_px, last.h_px)
 
     def _ground_points(self, image_rgb: npt.NDArray[np.uint8], box: BBox | None, roi: RoiFeatures,
                        T_world_cam: Pose) -> tuple[FloatArray, float]:
@@ -493,10 +361,6 @@ class TradePipeline:
             self.trajectory.update(position, sigma_m)
         state = self.trajectory.state
         return state.position_m.copy(), state.velocity_mps.copy()
-
-    def _in_image(self, pixel: FloatArray) -> bool:
-        K = self.intrinsics
-        return bool(np.all(np.isfinite(pixel)) and 0 <= pixel[0] < K.width_px and 0 <= pixel[1] < K.height_px)
 
     def _check_image(self, image_rgb: npt.NDArray[np.uint8]) -> None:
         K = self.intrinsics

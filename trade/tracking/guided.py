@@ -1,0 +1,199 @@
+"""The image side of TRADE: the correlation filter guided by a predicted pixel, per frame.
+
+Owns the DCF and the colour model, the choice of a peak near the trajectory prediction (with the
+constant-image-velocity window as a second opinion), re-detection while lost, the output box (colour-blob
+refinement, or coasting on the prediction) and the optional snapping of the initial box. The settings are
+the tracking fields of `trade.pipeline.PipelineConfig`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from trade.tracking.colour_box import ColourBoxRefiner
+from trade.tracking.dcf import DcfTracker
+from trade.tracking.peaks import PeakChoice, highest_peak, select_peak
+from trade.types import BBox
+
+if TYPE_CHECKING:
+    from trade.pipeline import PipelineConfig
+
+FloatArray = npt.NDArray[np.float64]
+ImageRGB = npt.NDArray[np.uint8]
+
+
+@dataclass(frozen=True, eq=False)
+class TrackedFrame:
+    """One frame's image tracking: the output box [px] (the coasting box when not tracked), the peak
+    chosen and whether it passed (a fresh box this frame)."""
+
+    box: BBox
+    choice: PeakChoice
+    tracked: bool
+
+
+def _inside(pixel: FloatArray, image_rgb: ImageRGB) -> bool:
+    """Whether (x, y) [px] is finite and inside the image."""
+    h, w = image_rgb.shape[:2]
+    return bool(np.all(np.isfinite(pixel)) and 0 <= pixel[0] < w and 0 <= pixel[1] < h)
+
+
+class GuidedTracker:
+    """`init(image, box)` once, then `step(image, predicted_px)` per frame (prediction NaN when none)."""
+
+    def __init__(self, config: PipelineConfig) -> None:
+        self.config = config
+        self.dcf = DcfTracker(config.dcf)
+        self.refiner = ColourBoxRefiner(config.colour_box)
+        self._box: BBox | None = None  # last output box
+        self._image_motion_px = np.zeros(2)  # last frame-to-frame shift of the tracked box centre (x, y)
+        self._tracked_last = True  # whether the previous frame was tracked (its shift is then current)
+        rings = np.arange(-config.reacquire_rings, config.reacquire_rings + 1)
+        grid = np.stack(np.meshgrid(rings, rings), axis=-1).reshape(-1, 2).astype(np.float64)
+        # (x, y) offsets of the re-detection windows in steps, the centre first
+        self._reacquire_offsets = grid[np.argsort(np.abs(grid).max(axis=1), kind="stable")]
+
+    def init(self, image_rgb: ImageRGB, box: BBox) -> BBox:
+        """Learn the target in `box` [px] (snapped to its colour blob when configured); the box used."""
+        self.refiner.init(image_rgb, box)
+        if self.config.snap_initial_box:
+            box = self._snapped(image_rgb, box)
+        self.dcf.init(image_rgb, box)
+        self._box = box
+        self._image_motion_px = np.zeros(2)
+        self._tracked_last = True
+        return box
+
+    def step(self, image_rgb: ImageRGB, predicted_px: FloatArray) -> TrackedFrame:
+        """Track into the next frame; `predicted_px` (2,) is the trajectory prediction (NaN when none)."""
+        cfg = self.config
+        if self._tracked_last or not cfg.trajectory_guidance:
+            choice, scale = self._choose_peak(image_rgb, predicted_px)
+            tracked = choice.score >= cfg.min_peak_score or not cfg.trajectory_guidance
+        else:
+            centre_px = predicted_px if _inside(predicted_px, image_rgb) else self.dcf.box.center
+            choice, scale, tracked = self._redetect(image_rgb, centre_px)
+        if tracked:
+            previous_px = self.dcf.box.center
+            dcf_box = self.dcf.commit(choice.location_px, scale)
+            self._image_motion_px = dcf_box.center - previous_px
+            if not choice.ambiguous:
+                self.dcf.update(image_rgb)
+            box = self._refine_box(image_rgb, dcf_box, learn=not choice.ambiguous)
+        else:
+            box = self._coast_box(image_rgb, predicted_px)
+            # the last shift is stale once a frame goes untracked: no constant-image-velocity guess
+            self._image_motion_px = np.zeros(2)
+        self._tracked_last = tracked
+        self._box = box
+        return TrackedFrame(box, choice, tracked)
+
+    def _snapped(self, image_rgb: ImageRGB, box: BBox) -> BBox:
+        """The colour blob at the given box's centre, with the colours relearnt from the blob
+        `snap_iterations` times (a box a few px off mixes ground into the first model, and the blob's
+        contrast is then too low to accept); the blob's tight box when the refiner accepts the last one
+        (colours learnt from it), else the given box (colours learnt from it)."""
+        candidate = box
+        for _ in range(self.config.snap_iterations):
+            refinement = self.refiner.refine(image_rgb, candidate.center, box, size_reference=box)
+            if refinement is None:
+                break
+            candidate = refinement.box
+            self.refiner.init(image_rgb, candidate)
+        final = self.refiner.refine(image_rgb, candidate.center, box, size_reference=box)
+        snapped = final.box if final is not None and final.accepted and self._similar_size(final.box, box) else box
+        self.refiner.init(image_rgb, snapped)
+        return snapped
+
+    def _similar_size(self, box: BBox, reference: BBox) -> bool:
+        """Whether width and height each lie within snap_max_side_ratio of the reference's."""
+        ratio = self.config.snap_max_side_ratio
+        sides = np.array([box.w_px / reference.w_px, box.h_px / reference.h_px])
+        return bool(np.all((sides <= ratio) & (sides >= 1.0 / ratio)))
+
+    def _choose_peak(self, image_rgb: ImageRGB, predicted_px: FloatArray) -> tuple[PeakChoice, float]:
+        last_px = self.dcf.box.center
+        if not self.config.trajectory_guidance:
+            response = self.dcf.response(image_rgb, last_px)
+            return highest_peak(response, self.config.peaks), response.scale
+        guided = _inside(predicted_px, image_rgb)
+        motion_px = last_px + self._image_motion_px  # where constant image velocity puts the target
+        choice, scale = self._select(image_rgb, predicted_px if guided else motion_px)
+        if not (guided and self._far_apart(predicted_px, motion_px)):
+            return choice, scale
+        # The prediction is only as good as the 3D estimate behind it (e.g. a roof taken for the ground
+        # puts the target at a wrong depth and the prediction drifts off it). When it has moved the
+        # window far from where the box's last image shift (constant image velocity) puts the target,
+        # search there too and keep that peak if the prediction's would not even be a candidate beside
+        # it (softmax ratio below candidate_fraction): s_motion - s_pred > T ln(1 / candidate_fraction).
+        alt, alt_scale = self._select(image_rgb, motion_px)
+        peaks = self.config.peaks
+        if alt.score - choice.score > peaks.softmax_temperature * math.log(1.0 / peaks.candidate_fraction):
+            return alt, alt_scale
+        return choice, scale
+
+    def _redetect(self, image_rgb: ImageRGB, centre_px: FloatArray) -> tuple[PeakChoice, float, bool]:
+        """While lost. Candidates: the paper's peak in the window at `centre_px` (the prediction), then the
+        top peaks of the other windows on the grid around it, highest first. The first that scores at least
+        reacquire_min_peak_score and whose colour blob passes the refiner's tests is taken (tracked); with
+        none, the prediction window's peak (not tracked). Returns the choice, its DSST scale, whether tracked."""
+        cfg, box = self.config, self.dcf.box
+        step_px = cfg.reacquire_step_fraction * cfg.dcf.padding * np.array([box.w_px, box.h_px])
+        centre_response = self.dcf.response(image_rgb, centre_px, with_scale=False)
+        guided = select_peak(centre_response, cfg.peaks)
+        others = [highest_peak(centre_response, cfg.peaks)]
+        for offset in self._reacquire_offsets[1:]:  # [0] is the centre window
+            centre = centre_px + offset * step_px
+            if _inside(centre, image_rgb):
+                others.append(highest_peak(self.dcf.response(image_rgb, centre, with_scale=False), cfg.peaks))
+        for choice in [guided, *sorted(others, key=lambda c: -c.score)]:
+            if choice.score >= cfg.reacquire_min_peak_score and self._colour_confirms(image_rgb, choice.location_px):
+                return choice, self.dcf.estimate_scale(image_rgb, choice.location_px), True
+        return guided, 1.0, False
+
+    def _colour_confirms(self, image_rgb: ImageRGB, location_px: FloatArray) -> bool:
+        """Whether the target's colour model finds a plausible blob of the target's size at `location_px`."""
+        refinement = self.refiner.refine(image_rgb, location_px, self._box, size_reference=self.dcf.box)
+        return refinement is not None and refinement.accepted
+
+    def _select(self, image_rgb: ImageRGB, centre_px: FloatArray) -> tuple[PeakChoice, float]:
+        """The paper's peak choice in the window centred at `centre_px`, and the DSST scale there."""
+        response = self.dcf.response(image_rgb, centre_px)
+        choice = select_peak(response, self.config.peaks)
+        # response.scale was estimated at the highest peak; re-estimate only when another peak won
+        if choice.score < float(response.scores.max()):
+            return choice, self.dcf.estimate_scale(image_rgb, choice.location_px)
+        return choice, response.scale
+
+    def _far_apart(self, predicted_px: FloatArray, motion_px: FloatArray) -> bool:
+        """Whether the trajectory prediction is offset from the constant-image-velocity one by more than
+        `second_window_offset_fraction` of the search window along either axis."""
+        box, fraction = self.dcf.box, self.config.second_window_offset_fraction
+        window = self.config.dcf.padding * np.array([box.w_px, box.h_px])
+        return bool(np.any(np.abs(np.asarray(predicted_px) - motion_px) > fraction * window))
+
+    def _refine_box(self, image_rgb: ImageRGB, dcf_box: BBox, learn: bool) -> BBox:
+        """The output box: the target's colour blob around the DCF centre when that blob is plausible,
+        else the last output size centred on the DCF location."""
+        centre = dcf_box.center
+        fallback = BBox.from_center(centre[0], centre[1], self._box.w_px, self._box.h_px)
+        if not self.config.box_refinement:
+            return dcf_box
+        refinement = self.refiner.refine(image_rgb, centre, self._box, size_reference=dcf_box)
+        if refinement is None or not refinement.accepted:
+            return fallback
+        if learn:
+            self.refiner.update(image_rgb, refinement)
+        return refinement.box
+
+    def _coast_box(self, image_rgb: ImageRGB, predicted_px: FloatArray) -> BBox:
+        """While lost, the box follows the trajectory prediction with its last size."""
+        last = self._box
+        if not _inside(predicted_px, image_rgb):
+            return last
+        return BBox.from_center(predicted_px[0], predicted_px[1], last.w_px, last.h_px)
