@@ -5,7 +5,17 @@ multiplication until it is promoted to a 3D point (paper, "ROI Feature tracking"
 
 Depth parametrisation: a track's depth is d0, the z-depth in its *first* camera frame, i.e. the world point
 X = C0 + d0 f0 on the first-observation ray f0 = R0 K^-1 [u0, v0, 1]^T. For a static point d0 is constant, so
-every frame's two-view estimate of d0 is fused directly; outputs are converted to the current camera frame.
+every frame's two-view estimate of d0 is fused directly, as a Gaussian in inverse depth 1/d0: its two-view
+error is near-Gaussian and of a spread that does not grow with the estimate, whereas fusing d0 itself weights
+each estimate by 1/sigma(d0)^2 ~ 1/d0^4 and so pulls the fused depth towards the nearer estimates (REMODE,
+LSD-SLAM and DSO filter inverse depth for the same reason). Outputs are converted to the current camera frame.
+
+Drift: KLT chained frame to frame accumulates a small error per frame, and under steady image motion that
+error has a steady sign: on images whose texture moves in whole-pixel steps (nearest-texel rendering, as
+pybullet's TinyRenderer) a track 30 frames old lags its point by 0.2-0.5 px in the desert scene, which makes
+young tracks' depths too far. Each chained position is therefore refined by KLT against the track's own
+first image (its anchor), starting from the chained position; a correction larger than anchor_max_shift_px
+is not trusted (the patch has changed too much) and the chained position is kept.
 """
 
 from __future__ import annotations
@@ -45,6 +55,8 @@ class RoiConfig:
     klt_max_iterations: int = 20
     klt_epsilon_px: float = 0.03
     fb_threshold_px: float = 1.0  # forward-backward KLT round-trip error
+    anchor_to_first_image: bool = True  # refine each chained KLT position against the track's first image
+    anchor_max_shift_px: float = 1.0  # larger refinements are not trusted; the chained position is kept
     pixel_sigma_px: float = 0.5  # 1-sigma of a tracked pixel, propagated to depth
     min_parallax_deg: float = 0.5  # angle between first and current ray needed to triangulate
     max_ray_gap_px: float = 2.0  # closest-approach gap of the two rays, in current pixels; above: drop track
@@ -58,7 +70,7 @@ class RoiConfig:
             if int(value) != value or value < low:
                 raise ValueError(f"RoiConfig.{name} must be an integer >= {low}, got {value!r}")
         positive = ("roi_margin_factor", "harris_quality_level", "klt_epsilon_px", "fb_threshold_px")
-        positive += ("pixel_sigma_px", "max_ray_gap_px", "promote_sigma_m")
+        positive += ("pixel_sigma_px", "max_ray_gap_px", "promote_sigma_m", "anchor_max_shift_px")
         for name in positive:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -161,6 +173,15 @@ def fuse_gaussian(
     return (mu * precision + z * w) / new_precision, new_precision
 
 
+def fuse_inverse_depth(
+    inv_mu: FloatArray, precision: FloatArray, depth_m: FloatArray, sigma_m: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Fuse depth measurements N(depth_m, sigma_m^2) into Gaussians over inverse depth N(inv_mu, 1/precision)
+    (precision 0 = no prior); the measurement's inverse-depth sigma is sigma_m / depth_m^2 (first order)."""
+    inv_depth = 1.0 / depth_m
+    return fuse_gaussian(inv_mu, precision, inv_depth, sigma_m * np.square(inv_depth))
+
+
 def _oldest_per_tile(tiles: IntArray, ids: IntArray, cap: int) -> BoolArray:
     """(N,) keep-mask of the `cap` oldest (smallest id) tracks of each tile; tracks migrate between tiles."""
     order = np.lexsort((ids, tiles))  # by tile, then id
@@ -182,6 +203,7 @@ class RoiFeatureTracker:
         self._erode_kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (diameter_px, diameter_px))
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, config.klt_max_iterations, config.klt_epsilon_px)
         self._lk = dict(winSize=(config.klt_window_px,) * 2, maxLevel=config.klt_pyramid_levels, criteria=criteria)
+        self._anchor_lk = dict(winSize=(config.klt_window_px,) * 2, maxLevel=0, criteria=criteria)
         self.reset()
 
     def reset(self) -> None:
@@ -193,9 +215,12 @@ class RoiFeatureTracker:
         self._first_px = np.zeros((0, 2))  # first observation: pixel ...
         self._first_center = np.zeros((0, 3))  # ... camera centre t0 of T_world_cam [m] ...
         self._first_ray = np.zeros((0, 3))  # ... and world ray f0 = R0 K^-1 [u0, v0, 1]
-        self._mu = np.zeros(0)  # fused d0 [m]
-        self._precision = np.zeros(0)  # 1 / sigma(d0)^2; 0 = not triangulated yet
+        self._inv_mu = np.zeros(0)  # fused 1/d0 [1/m]
+        self._precision = np.zeros(0)  # 1 / sigma(1/d0)^2 [m^2]; 0 = not triangulated yet
         self._promoted = np.zeros(0, bool)
+        self._birth = np.zeros(0, np.int64)  # frame index of each track's first observation
+        self._frame = 0  # index of the next frame
+        self._anchors: dict[int, npt.NDArray[np.uint8]] = {}  # first image of the live tracks, by frame index
 
     def step(self, gray: npt.NDArray[np.uint8], box: BBox, T_world_cam: Pose) -> RoiFeatures:
         """gray: (H, W) uint8 image; box: target box [px]; T_world_cam: current camera pose."""
@@ -211,6 +236,8 @@ class RoiFeatureTracker:
         self._fuse(T_world_cam)
         self._top_up(gray, xs, ys, T_world_cam)
         self._prev = gray.copy()
+        self._keep_anchors()
+        self._frame += 1
         return self._output(T_world_cam, xs, ys)
 
     def _track(self, gray: npt.NDArray[np.uint8]) -> BoolArray:
@@ -220,12 +247,40 @@ class RoiFeatureTracker:
         p0_back, st2, _ = cv2.calcOpticalFlowPyrLK(gray, self._prev, p1, None, **self._lk)
         fb_px = np.linalg.norm((p0_back - p0).reshape(-1, 2), axis=1)
         self._px = p1.reshape(-1, 2)
+        found = st1.ravel().astype(bool) & st2.ravel().astype(bool) & (fb_px < self.config.fb_threshold_px)
+        if self.config.anchor_to_first_image:
+            self._refine_against_anchors(gray, found)
         x, y = self._px[:, 0], self._px[:, 1]
         in_image = (x >= 0) & (y >= 0) & (x <= self.intrinsics.width_px - 1) & (y <= self.intrinsics.height_px - 1)
-        return st1.ravel().astype(bool) & st2.ravel().astype(bool) & (fb_px < self.config.fb_threshold_px) & in_image
+        return found & in_image
+
+    def _refine_against_anchors(self, gray: npt.NDArray[np.uint8], found: BoolArray) -> None:
+        """KLT from each track's first image and pixel to `gray`, started at the chained position (no pyramid:
+        the start is within a pixel or two); refinements within anchor_max_shift_px replace the chained pixel."""
+        for birth in np.unique(self._birth[found]).tolist():
+            idx = np.flatnonzero(found & (self._birth == birth))
+            start = self._px[idx].reshape(-1, 1, 2).copy()
+            first = self._first_px[idx].astype(np.float32).reshape(-1, 1, 2)
+            refined, status, _ = cv2.calcOpticalFlowPyrLK(
+                self._anchors[birth], gray, first, start, **self._anchor_lk, flags=cv2.OPTFLOW_USE_INITIAL_FLOW
+            )
+            refined = refined.reshape(-1, 2)
+            shift_px = np.linalg.norm(refined - self._px[idx], axis=1)
+            take = status.ravel().astype(bool) & (shift_px <= self.config.anchor_max_shift_px)
+            self._px[idx[take]] = refined[take]
+
+    def _keep_anchors(self) -> None:
+        """Keep the first images of live tracks only, adding this frame's if tracks started in it."""
+        if not self.config.anchor_to_first_image:
+            return
+        live = set(np.unique(self._birth).tolist())
+        self._anchors = {birth: image for birth, image in self._anchors.items() if birth in live}
+        if self._frame in live:
+            self._anchors[self._frame] = self._prev
 
     def _select(self, keep: BoolArray) -> None:
-        for name in ("_ids", "_px", "_first_px", "_first_center", "_first_ray", "_mu", "_precision", "_promoted"):
+        for name in ("_ids", "_px", "_first_px", "_first_center", "_first_ray", "_inv_mu", "_precision", "_promoted",
+                     "_birth"):
             setattr(self, name, getattr(self, name)[keep])
 
     def _world_rays(self, pixels: FloatArray, T_world_cam: Pose) -> FloatArray:
@@ -233,15 +288,16 @@ class RoiFeatureTracker:
         return self.intrinsics.rays(pixels) @ T_world_cam.R.T
 
     def _fuse(self, T_world_cam: Pose) -> None:
-        """Triangulate every track against its first observation; fuse valid d0; drop inconsistent tracks."""
+        """Triangulate every track against its first observation; fuse valid 1/d0; drop inconsistent tracks."""
         if not len(self._ids):
             return
         rays = self._world_rays(self._px.astype(np.float64), T_world_cam)
         cfg = self.config
         tv = triangulate_first_ray(self._first_center, self._first_ray, T_world_cam.t, rays, self._focal_px, cfg)
         use = tv.valid & (tv.ray_gap_px <= cfg.max_ray_gap_px)
-        mu, precision = fuse_gaussian(self._mu[use], self._precision[use], tv.depth_first_m[use], tv.sigma_first_m[use])
-        self._mu[use], self._precision[use] = mu, precision
+        self._inv_mu[use], self._precision[use] = fuse_inverse_depth(
+            self._inv_mu[use], self._precision[use], tv.depth_first_m[use], tv.sigma_first_m[use]
+        )
         self._select(use | ~tv.valid)  # drop tracks whose rays miss each other: moving or mistracked
 
     def _top_up(self, gray: npt.NDArray[np.uint8], xs: FloatArray, ys: FloatArray, T_world_cam: Pose) -> None:
@@ -290,16 +346,19 @@ class RoiFeatureTracker:
         self._first_px = np.concatenate([self._first_px, first])
         self._first_center = np.concatenate([self._first_center, np.broadcast_to(T_world_cam.t, (n, 3))])
         self._first_ray = np.concatenate([self._first_ray, self._world_rays(first, T_world_cam)])
-        self._mu = np.concatenate([self._mu, np.zeros(n)])
+        self._inv_mu = np.concatenate([self._inv_mu, np.zeros(n)])
         self._precision = np.concatenate([self._precision, np.zeros(n)])
         self._promoted = np.concatenate([self._promoted, np.zeros(n, bool)])
+        self._birth = np.concatenate([self._birth, np.full(n, self._frame, np.int64)])
 
     def _output(self, T_world_cam: Pose, xs: FloatArray, ys: FloatArray) -> RoiFeatures:
-        """World point X = C0 + d0 f0; depth = z of R^T (X - C); sigma = |dz/dd0| sigma(d0) = |(R^T f0)_z| sigma(d0)."""
+        """World point X = C0 + d0 f0; depth = z of R^T (X - C); sigma(d0) = d0^2 sigma(1/d0);
+        sigma = |dz/dd0| sigma(d0) = |(R^T f0)_z| sigma(d0)."""
         known = self._precision > 0
         with np.errstate(divide="ignore"):
-            sigma0 = np.where(known, 1.0 / np.sqrt(self._precision), np.inf)
-        points = np.where(known[:, None], self._first_center + self._mu[:, None] * self._first_ray, np.nan)
+            d0 = np.where(known, 1.0 / np.where(known, self._inv_mu, 1.0), np.nan)
+            sigma0 = np.where(known, np.square(d0) / np.sqrt(np.where(known, self._precision, 1.0)), np.inf)
+        points = np.where(known[:, None], self._first_center + d0[:, None] * self._first_ray, np.nan)
         depth = ((points - T_world_cam.t) @ T_world_cam.R)[:, 2]
         sigma = np.abs((self._first_ray @ T_world_cam.R)[:, 2]) * sigma0
         threshold = np.maximum(self.config.promote_sigma_m, self.config.promote_relative_sigma * depth)

@@ -12,6 +12,7 @@ from trade.roi_features import (
     RoiConfig,
     RoiFeatureTracker,
     fuse_gaussian,
+    fuse_inverse_depth,
     roi_tile_edges,
     tile_index,
     triangulate_first_ray,
@@ -44,14 +45,15 @@ def _texture(rng: np.random.Generator) -> np.ndarray:
     return cv2.normalize(noise, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
 
 
-def _render(texture: np.ndarray, K: CameraIntrinsics, T_world_cam: Pose) -> np.ndarray:
+def _render(texture: np.ndarray, K: CameraIntrinsics, T_world_cam: Pose, interpolation: int = cv2.INTER_LINEAR
+            ) -> np.ndarray:
     """Ground plane z = 0 seen from T_world_cam: warp by H = K (R + t n^T / d) K_tex^-1 (plane n . X = d)."""
     K_tex = np.array([[TEXTURE_FOCAL_PX, 0, TEXTURE_PX / 2], [0, TEXTURE_FOCAL_PX, TEXTURE_PX / 2], [0, 0, 1]])
     T_world_tex = Pose(R_DOWN, np.array([0.0, 0.0, HEIGHT_M]))
     T_cam_tex = T_world_cam.inverse().compose(T_world_tex)
     n_tex, d_tex = T_world_tex.R.T @ N_WORLD, -N_WORLD @ T_world_tex.t
     H = K.K @ (T_cam_tex.R + np.outer(T_cam_tex.t, n_tex) / d_tex) @ np.linalg.inv(K_tex)
-    return cv2.warpPerspective(texture, H, (K.width_px, K.height_px), flags=cv2.INTER_LINEAR)
+    return cv2.warpPerspective(texture, H, (K.width_px, K.height_px), flags=interpolation)
 
 
 def _plane_depth(K: CameraIntrinsics, T_world_cam: Pose, pixels: np.ndarray) -> np.ndarray:
@@ -139,21 +141,76 @@ def test_depth_filter_static_point_translating_camera_converges_within_2_percent
     noisy0 = pixels0 + rng.normal(0.0, 0.3, (n, 2))
     center0 = np.broadcast_to(pose0.t, (n, 3))
     ray0 = K.rays(noisy0) @ pose0.R.T
-    mu, precision = np.zeros(n), np.zeros(n)
+    inv_mu, precision = np.zeros(n), np.zeros(n)
     sigmas = []
     for k in range(1, 61):
         pose = _camera_pose(k * 0.2)
         pixels = project_world(K, pose, points) + rng.normal(0.0, 0.3, (n, 2))
         tv = triangulate_first_ray(center0, ray0, pose.t, K.rays(pixels) @ pose.R.T, K.fx_px, config)
         assert np.all(tv.ray_gap_px[tv.valid] < 2.0)
-        mu[tv.valid], precision[tv.valid] = fuse_gaussian(
-            mu[tv.valid], precision[tv.valid], tv.depth_first_m[tv.valid], tv.sigma_first_m[tv.valid]
+        inv_mu[tv.valid], precision[tv.valid] = fuse_inverse_depth(
+            inv_mu[tv.valid], precision[tv.valid], tv.depth_first_m[tv.valid], tv.sigma_first_m[tv.valid]
         )
         if k >= 5:  # every point triangulated by now (parallax >= min_parallax_deg)
-            sigmas.append(1.0 / np.sqrt(precision))
-    assert np.all(np.abs(mu - depth0) / depth0 < 0.02)
+            sigmas.append(np.square(1.0 / inv_mu) / np.sqrt(precision))  # sigma(d) = d^2 sigma(1/d)
+    assert np.all(np.abs(1.0 / inv_mu - depth0) / depth0 < 0.02)
     assert np.all(np.diff(np.array(sigmas), axis=0) <= 0)  # fusion never increases the uncertainty
     assert np.all(sigmas[-1] < 0.01 * depth0)
+
+
+def test_inverse_depth_fusion_is_less_biased_than_depth_fusion_at_small_parallax() -> None:
+    """Two-view depths from short baselines: fusing them in depth pulls towards the near estimates (weights
+    1/sigma^2 fall as depth^-4); fusing inverse depth keeps the mean within 2 % after 12 frames of 5 cm."""
+    K = CameraIntrinsics.from_fov(SIZE_PX, SIZE_PX, FOV_DEG)
+    config = RoiConfig(pixel_sigma_px=0.5)
+    rng = np.random.default_rng(3)
+    n = 2000
+    pose0 = _camera_pose(0.0)
+    pixels0 = rng.uniform(40, SIZE_PX - 40, (n, 2))
+    depth0 = rng.uniform(15.0, 25.0, n)
+    points = pose0.apply(K.backproject(pixels0, depth0))
+    center0, ray0 = np.broadcast_to(pose0.t, (n, 3)), K.rays(pixels0) @ pose0.R.T
+    mu, precision, inv_mu, inv_precision = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
+    for k in range(1, 13):
+        pose = _camera_pose(k * 0.05)
+        pixels = project_world(K, pose, points) + rng.normal(0.0, 0.5, (n, 2))
+        tv = triangulate_first_ray(center0, ray0, pose.t, K.rays(pixels) @ pose.R.T, K.fx_px, config)
+        v = tv.valid
+        mu[v], precision[v] = fuse_gaussian(mu[v], precision[v], tv.depth_first_m[v], tv.sigma_first_m[v])
+        inv_mu[v], inv_precision[v] = fuse_inverse_depth(inv_mu[v], inv_precision[v], tv.depth_first_m[v],
+                                                         tv.sigma_first_m[v])
+    assert np.all(inv_precision > 0)
+    bias_depth = np.mean((mu - depth0) / depth0)
+    bias_inverse = np.mean((1.0 / inv_mu - depth0) / depth0)
+    assert bias_depth < -0.03  # the near pull this module avoids
+    assert abs(bias_inverse) < 0.02 and abs(bias_inverse) < 0.5 * abs(bias_depth)
+
+
+def _track_errors_px(anchor: bool, n_frames: int, step_m: float) -> np.ndarray:
+    """Pixel errors of the tracks alive at the end of a slow sideways pass over the textured plane, rendered
+    with nearest-texel sampling as pybullet's TinyRenderer does (the image moves in whole-pixel steps)."""
+    K = CameraIntrinsics.from_fov(SIZE_PX, SIZE_PX, FOV_DEG)
+    texture = _texture(np.random.default_rng(5))
+    tracker = RoiFeatureTracker(RoiConfig(anchor_to_first_image=anchor), K)
+    first_seen: dict[int, tuple[np.ndarray, Pose]] = {}
+    for k in range(n_frames):
+        pose = _camera_pose(k * step_m)
+        out = tracker.step(_render(texture, K, pose, cv2.INTER_NEAREST), BOX, pose)
+        for i, px in zip(out.track_ids, out.first_pixels):
+            first_seen.setdefault(int(i), (px, pose))
+    errors = [np.linalg.norm(px - project_world(K, pose, _plane_point(K, first_seen[int(i)][1], px0[None]))[0])
+              for i, px, px0 in zip(out.track_ids, out.pixels, out.first_pixels) if first_seen[int(i)][1] is not pose]
+    return np.asarray(errors)
+
+
+def test_anchoring_to_first_image_keeps_long_tracks_on_their_points() -> None:
+    """60 frames of ~0.2 px image motion: chained frame to frame, KLT drifts by about a pixel (median);
+    refined against their first image, tracks stay within a few tenths of a pixel of the true projection."""
+    anchored = _track_errors_px(anchor=True, n_frames=60, step_m=0.01)
+    chained = _track_errors_px(anchor=False, n_frames=60, step_m=0.01)
+    assert len(anchored) >= 100 and len(chained) >= 100
+    assert np.median(anchored) < 0.2 and np.percentile(anchored, 95) < 0.6
+    assert np.median(chained) > 3.0 * np.median(anchored)
 
 
 def test_triangulate_moving_point_large_ray_gap() -> None:
