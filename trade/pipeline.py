@@ -85,10 +85,13 @@ class PipelineConfig:
     # at 160 px, more than half the 2x-box window), so besides the prediction's window the windows on a grid
     # of `reacquire_rings` rings around it, `reacquire_step_fraction` of the window apart, are searched. A
     # peak is taken back only at `reacquire_min_peak_score` (hysteresis: clutter near the prediction scores
-    # 0.1-0.2 while the target is hidden) and where the colour model finds the target's blob.
+    # 0.1-0.2 while the target is hidden) and where the colour model finds the target's blob. The paper's peak
+    # in the prediction's window is taken without the colour check at `reacquire_confident_score`: a target
+    # re-emerging from under an occluder shows only part of its blob, which the colour model refuses.
     reacquire_rings: int = 1
     reacquire_step_fraction: float = 0.5
     reacquire_min_peak_score: float = 0.2
+    reacquire_confident_score: float = 0.35
     trajectory_preview_s: float = 1.0  # horizon of the predicted trajectory kept for drawing
     trajectory_preview_points: int = 10
 
@@ -107,7 +110,7 @@ class PipelineConfig:
             value = getattr(self, name)
             if int(value) != value or not 3 <= value <= self.fusion.buffer_size:
                 raise ValueError(f"PipelineConfig.{name} must be an integer in [3, fusion.buffer_size], got {value!r}")
-        for name in ("min_peak_score", "reacquire_min_peak_score"):
+        for name in ("min_peak_score", "reacquire_min_peak_score", "reacquire_confident_score"):
             if not math.isfinite(getattr(self, name)):
                 raise ValueError(f"PipelineConfig.{name} must be finite, got {getattr(self, name)!r}")
         if not (math.isfinite(self.snap_max_side_ratio) and self.snap_max_side_ratio >= 1.0):

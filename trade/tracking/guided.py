@@ -139,9 +139,11 @@ class GuidedTracker:
 
     def _redetect(self, image_rgb: ImageRGB, centre_px: FloatArray) -> tuple[PeakChoice, float, bool]:
         """While lost. Candidates: the paper's peak in the window at `centre_px` (the prediction), then the
-        top peaks of the other windows on the grid around it, highest first. The first that scores at least
-        reacquire_min_peak_score and whose colour blob passes the refiner's tests is taken (tracked); with
-        none, the prediction window's peak (not tracked). Returns the choice, its DSST scale, whether tracked."""
+        top peaks of the other windows on the grid around it, highest first. The prediction window's peak is
+        taken (tracked) at once if it scores at least reacquire_confident_score (a target re-emerging from
+        under an occluder shows only part of its colour blob); otherwise the first candidate that scores at
+        least reacquire_min_peak_score and whose colour blob passes the refiner's tests; with none, the
+        prediction window's peak (not tracked). Returns the choice, its DSST scale, whether tracked."""
         cfg, box = self.config, self.dcf.box
         step_px = cfg.reacquire_step_fraction * cfg.dcf.padding * np.array([box.w_px, box.h_px])
         centre_response = self.dcf.response(image_rgb, centre_px, with_scale=False)
@@ -151,6 +153,8 @@ class GuidedTracker:
             centre = centre_px + offset * step_px
             if _inside(centre, image_rgb):
                 others.append(highest_peak(self.dcf.response(image_rgb, centre, with_scale=False), cfg.peaks))
+        if guided.score >= max(cfg.reacquire_confident_score, cfg.reacquire_min_peak_score):
+            return guided, self.dcf.estimate_scale(image_rgb, guided.location_px), True
         for choice in [guided, *sorted(others, key=lambda c: -c.score)]:
             if choice.score >= cfg.reacquire_min_peak_score and self._colour_confirms(image_rgb, choice.location_px):
                 return choice, self.dcf.estimate_scale(image_rgb, choice.location_px), True
