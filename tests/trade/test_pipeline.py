@@ -245,7 +245,8 @@ def test_pipeline_redetects_target_away_from_the_coasting_prediction_after_occlu
 
 @pytest.mark.parametrize("field, value", [("reacquire_rings", -1), ("reacquire_rings", 1.5), ("snap_iterations", -1),
                                           ("snap_max_side_ratio", 0.9),
-                                          ("reacquire_step_fraction", 0.0), ("reacquire_min_peak_score", np.nan)])
+                                          ("reacquire_step_fraction", 0.0), ("reacquire_min_peak_score", np.nan),
+                                          ("reacquire_confident_score", np.inf)])
 def test_pipeline_config_rejects_bad_reacquisition_and_snap_settings(field, value):
     with pytest.raises(ValueError, match=field):
         PipelineConfig(**{field: value})
