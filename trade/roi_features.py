@@ -203,7 +203,7 @@ class RoiFeatureTracker:
         self._erode_kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (diameter_px, diameter_px))
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, config.klt_max_iterations, config.klt_epsilon_px)
         self._lk = dict(winSize=(config.klt_window_px,) * 2, maxLevel=config.klt_pyramid_levels, criteria=criteria)
-        self._anchor_lk = dict(winSize=(config.klt_window_px,) * 2, maxLevel=0, criteria=criteria)
+        self._anchor_lk = {**self._lk, "maxLevel": 0}  # the start is within a pixel or two of the answer
         self.reset()
 
     def reset(self) -> None:
@@ -259,7 +259,7 @@ class RoiFeatureTracker:
         the start is within a pixel or two); refinements within anchor_max_shift_px replace the chained pixel."""
         for birth in np.unique(self._birth[found]).tolist():
             idx = np.flatnonzero(found & (self._birth == birth))
-            start = self._px[idx].reshape(-1, 1, 2).copy()
+            start = self._px[idx].reshape(-1, 1, 2)
             first = self._first_px[idx].astype(np.float32).reshape(-1, 1, 2)
             refined, status, _ = cv2.calcOpticalFlowPyrLK(
                 self._anchors[birth], gray, first, start, **self._anchor_lk, flags=cv2.OPTFLOW_USE_INITIAL_FLOW
@@ -355,9 +355,9 @@ class RoiFeatureTracker:
         """World point X = C0 + d0 f0; depth = z of R^T (X - C); sigma(d0) = d0^2 sigma(1/d0);
         sigma = |dz/dd0| sigma(d0) = |(R^T f0)_z| sigma(d0)."""
         known = self._precision > 0
-        with np.errstate(divide="ignore"):
-            d0 = np.where(known, 1.0 / np.where(known, self._inv_mu, 1.0), np.nan)
-            sigma0 = np.where(known, np.square(d0) / np.sqrt(np.where(known, self._precision, 1.0)), np.inf)
+        with np.errstate(divide="ignore"):  # inv_mu and precision are 0 where never triangulated
+            d0 = np.where(known, 1.0 / self._inv_mu, np.nan)
+            sigma0 = np.where(known, np.square(d0) / np.sqrt(self._precision), np.inf)
         points = np.where(known[:, None], self._first_center + d0[:, None] * self._first_ray, np.nan)
         depth = ((points - T_world_cam.t) @ T_world_cam.R)[:, 2]
         sigma = np.abs((self._first_ray @ T_world_cam.R)[:, 2]) * sigma0

@@ -148,13 +148,13 @@ class GuidedTracker:
         step_px = cfg.reacquire_step_fraction * cfg.dcf.padding * np.array([box.w_px, box.h_px])
         centre_response = self.dcf.response(image_rgb, centre_px, with_scale=False)
         guided = select_peak(centre_response, cfg.peaks)
+        if guided.score >= max(cfg.reacquire_confident_score, cfg.reacquire_min_peak_score):
+            return guided, self.dcf.estimate_scale(image_rgb, guided.location_px), True
         others = [highest_peak(centre_response, cfg.peaks)]
         for offset in self._reacquire_offsets[1:]:  # [0] is the centre window
             centre = centre_px + offset * step_px
             if _inside(centre, image_rgb):
                 others.append(highest_peak(self.dcf.response(image_rgb, centre, with_scale=False), cfg.peaks))
-        if guided.score >= max(cfg.reacquire_confident_score, cfg.reacquire_min_peak_score):
-            return guided, self.dcf.estimate_scale(image_rgb, guided.location_px), True
         for choice in [guided, *sorted(others, key=lambda c: -c.score)]:
             if choice.score >= cfg.reacquire_min_peak_score and self._colour_confirms(image_rgb, choice.location_px):
                 return choice, self.dcf.estimate_scale(image_rgb, choice.location_px), True
