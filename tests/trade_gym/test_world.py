@@ -133,6 +133,35 @@ def test_desert_decoys_include_mover_and_parked_car_within_15_m_of_path(client):
         assert np.min(route.closest(xy)[0]) <= DECOY_NEAR_PATH_M
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_desert_overtaking_decoy_passes_beside_target_in_its_lane_within_15_s(client, seed):
+    """One identical car drives the target's way in a lane beside it: behind at the start, level with it within
+    the paper's 15 s sequence (1-2 m between the cars, same heading), ahead at the end."""
+    world = _build(client, "desert", seed)
+    t = np.linspace(0.0, 15.0, 151)
+    target = np.array([world.vehicle_pose(world.target, ti)[0][:2] for ti in t])
+    heading = np.array([world.target.motion.path.heading_rad(world.target.motion.distance_m(ti)) for ti in t])
+    forward = np.column_stack([np.cos(heading), np.sin(heading)])
+
+    def along_and_beside(d):
+        rel = np.array([world.vehicle_pose(d, ti)[0][:2] for ti in t]) - target
+        return np.einsum("ij,ij->i", rel, forward), np.abs(forward[:, 0] * rel[:, 1] - forward[:, 1] * rel[:, 0])
+
+    passes = []
+    for d in world.decoys:
+        along, beside = along_and_beside(d)
+        if d.motion.is_moving and along[0] < -5.0 and along[-1] > 5.0:
+            passes.append((along, beside, d))
+    assert len(passes) == 1
+    along, beside, decoy = passes[0]
+    level = np.abs(along) < 2.0
+    assert level.any() and np.all((beside[level] > 3.0 - 0.3) & (beside[level] < 3.8 + 0.3))
+    level_time = t[np.argmin(np.abs(along))]
+    decoy_heading = decoy.motion.path.heading_rad(decoy.motion.distance_m(level_time))
+    target_heading = world.target.motion.path.heading_rad(world.target.motion.distance_m(level_time))
+    assert abs(np.angle(np.exp(1j * (decoy_heading - target_heading)))) < np.radians(10.0)
+
+
 def test_city_takeoff_building_tall_and_roof_fills_part_of_start_view(client):
     world = _build(client, "city", seed=2)
     k = world.layout.takeoff_building

@@ -1,6 +1,7 @@
 """Rocky desert layout: fractal dunes, boulders, a target car and identical decoy cars.
 
-Owns `make_desert`; parked decoys flank the route, one decoy crosses it and one drives past beside it.
+Owns `make_desert`; parked decoys flank the route, one decoy crosses it, one drives past beside it the other
+way and one overtakes the target in a lane beside it.
 """
 
 from __future__ import annotations
@@ -34,7 +35,14 @@ PASS_OFFSET_M = (8.0, 11.0)
 PASS_HALF_LENGTH_M = 25.0
 PASS_MIN_CLEARANCE_M = 5.0
 DECOY_SPEED_RATIO = (0.85, 1.15)
-MOVING_DECOY_KINDS = 2  # one crossing the route, one passing beside it
+# The overtaking decoy drives a lane beside the route, draws level with the target this long after the start
+# (within the paper's 15 s sequence) and pulls ahead: the same heading as the target, side by side.
+OVERTAKE_LEVEL_S = (6.0, 10.0)
+OVERTAKE_LATERAL_M = (3.0, 3.8)  # centre to centre: about 1-2 m between the two cars
+OVERTAKE_SPEED_RATIO = (1.5, 1.8)
+OVERTAKE_LEAD_IN_M = 5.0  # straight lane before the route's start, beyond the distance the decoy starts behind
+LANE_SAMPLE_M = 4.0  # spacing of the lane's control points along the route [m]
+MOVING_DECOY_KINDS = 3  # one crossing the route, one passing beside it, one overtaking
 PARK_NEAR_LATERAL_M = (5.0, DECOY_NEAR_PATH_M - 2.0)
 PARK_FAR_LATERAL_M = (20.0, 35.0)
 PARK_ROUTE_SPAN = (0.1, 0.95)
@@ -83,6 +91,20 @@ def _oncoming(route: CatmullRomSpline, speed: float, rng: np.random.Generator) -
             break
         offset += 1.0
     return timed_motion(path, speed * rng.uniform(*DECOY_SPEED_RATIO), path.closest(meet)[1][0], s_m / speed)
+
+
+def _overtaking(route: CatmullRomSpline, speed: float, rng: np.random.Generator) -> VehicleMotion:
+    """A car in a lane 3-3.8 m beside the route, faster than the target, level with it 6-10 s after the start."""
+    side, lateral = rng.choice([-1.0, 1.0]), rng.uniform(*OVERTAKE_LATERAL_M)
+    level_s, ratio = rng.uniform(*OVERTAKE_LEVEL_S), rng.uniform(*OVERTAKE_SPEED_RATIO)
+    behind_m = (ratio - 1.0) * speed * level_s + OVERTAKE_LEAD_IN_M  # lane length before the route's start
+    s = np.arange(0.0, route.length_m, LANE_SAMPLE_M)
+    lane = route.position_m(s) + side * lateral * left_normal(route.tangent(s))
+    start = lane[0] - behind_m * route.tangent(0.0)
+    path = CatmullRomSpline(np.vstack([start, lane]))
+    level_at = path.closest(route.position_m(speed * level_s) + side * lateral * left_normal(
+        route.tangent(speed * level_s)))[1][0]
+    return timed_motion(path, speed * ratio, level_at, level_s)
 
 
 def _parked(route: CatmullRomSpline, paths: list[CatmullRomSpline], spots: list[np.ndarray],
@@ -138,7 +160,8 @@ def make_desert(spec: SceneSpec, rng: np.random.Generator, speed: float) -> Scen
     route = _route(spec, rng)
     heights = DUNE_AMPLITUDE_M * fractal_noise(shape, DUNE_CELLS, 3, 0.5, rng)
     heights += ROUGH_AMPLITUDE_M * fractal_noise(shape, ROUGH_CELLS, 3, 0.5, rng)
-    moving = [_crossing(route, speed, rng), _oncoming(route, speed, rng)][: spec.moving_decoys]
+    makers = (_crossing, _oncoming, _overtaking)
+    moving = [make(route, speed, rng) for make in makers[: spec.moving_decoys]]
     driven = [route] + [m.path for m in moving]
     spots: list[np.ndarray] = []
     near = [_parked(route, driven, spots, PARK_NEAR_LATERAL_M, PARK_ROUTE_SPAN, rng)

@@ -59,7 +59,7 @@ SCENES: MappingProxyType[str, SceneSpec] = MappingProxyType(
         "desert": SceneSpec(
             name="desert", follow_altitude_agl_m=16.0, target_kind="car", target_speed_mps=3.0,
             route_length_m=100.0, terrain_size_m=250.0, terrain_spacing_m=1.25, ground_texture="desert_ground",
-            decoy_kind="car", parked_decoys_near_path=4, parked_decoys_far=1, moving_decoys=2, boulder_count=110,
+            decoy_kind="car", parked_decoys_near_path=4, parked_decoys_far=1, moving_decoys=3, boulder_count=110,
         ),
         "city": SceneSpec(
             name="city", follow_altitude_agl_m=32.0, target_kind="truck", target_speed_mps=1.5,
