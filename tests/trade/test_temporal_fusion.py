@@ -115,7 +115,8 @@ def test_fusion_same_seed_same_planes() -> None:
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("buffer_size", 2), ("min_points", 2000), ("gate_mse_factor", 0.0), ("gate_min_m", -1.0), ("max_gated_frames", -1)],
+    [("buffer_size", 2), ("min_points", 2000), ("gate_mse_factor", 0.0), ("gate_min_m", -1.0), ("max_gated_frames", -1),
+     ("max_age_frames", -1), ("max_age_frames", 1.5)],
 )
 def test_fusion_config_bad_field_raises_naming_it(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
@@ -127,3 +128,26 @@ def test_fusion_uses_injected_ransac_config() -> None:
     fusion = TemporalPlaneFusion(cfg, np.random.default_rng(8))
     res = fusion.update(ground_frame(np.random.default_rng(9)))
     assert res.n_accepted < N_PER_FRAME  # a 5 cm band drops part of the 5 cm-noise points
+
+
+def _crest_frame(rng: np.random.Generator, centre_x_m: float, n: int = 8) -> np.ndarray:
+    """n points within 5 m of x = centre_x_m on ground that climbs at 10 % up to x = -10 m and is level
+    (z = 0) after it; y in [-4, 4] m, noise NOISE_M."""
+    xy = np.c_[rng.uniform(centre_x_m - 5.0, centre_x_m + 5.0, n), rng.uniform(-4.0, 4.0, n)]
+    z = np.minimum(0.1 * (xy[:, 0] + 10.0), 0.0)
+    return np.c_[xy, z + rng.normal(0.0, NOISE_M, n)]
+
+
+@pytest.mark.parametrize(("max_age_frames", "fits_level_ground"), [(0, False), (15, True)])
+def test_fusion_max_age_keeps_old_sparse_ground_out_of_the_fit(max_age_frames: int, fits_level_ground: bool) -> None:
+    """8 points per frame around a target driving over a crest onto level ground: 1000 points span the whole
+    drive, the plane stays on the slope behind (0.8 m off at the target, the level points gated out) unless
+    old points leave the fit."""
+    rng = np.random.default_rng(3)
+    config = TemporalFusionConfig(min_points=6, max_age_frames=max_age_frames)
+    fusion = TemporalPlaneFusion(config, np.random.default_rng(4))
+    centres_m = np.arange(-40.0, 0.25, 0.5)
+    for centre in centres_m:
+        res = fusion.update(_crest_frame(rng, centre))
+    error_m = abs(res.plane.height_at(np.array([0.0, 0.0])))
+    assert (error_m < 0.1) == fits_level_ground, error_m
