@@ -140,7 +140,8 @@ class TemporalPlaneFusion:
         self._append(accepted)
         buffered = self._buffer[: self._count]  # fit order is irrelevant: no roll needed
         if self.config.max_age_frames > 0:  # the frame just appended is always recent enough
-            buffered = buffered[self._updates - self._born[: self._count] < self.config.max_age_frames]
+            recent = self._updates - self._born[: self._count] < self.config.max_age_frames
+            buffered = buffered if recent.all() else buffered[recent]
         fit = multi_ransac(buffered, self.config.ransac, self._rng, query_xy)
         if fit is None:
             return self._result(n_acc, n_in - n_acc, self._plane is not None, reinitialised, gate_m)
