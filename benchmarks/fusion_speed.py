@@ -17,7 +17,6 @@ import json
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import time
 from datetime import datetime, timezone
@@ -25,6 +24,8 @@ from pathlib import Path
 from types import ModuleType
 
 import numpy as np
+from ab_speed import _commit  # benchmarks/ is on sys.path when this script runs
+
 
 HERE = Path(__file__).resolve().parents[1]
 N_FRAMES = 450  # the paper's 15 s at 30 Hz
@@ -82,11 +83,7 @@ def main() -> None:
         result["cases"][case] = {"points_per_frame": n, "base_ms": round(base, 3), "new_ms": round(new, 3),
                                  "ratio_new_over_base": round(new / base, 3)}
         print(f"{case} ({n} points/frame): base {base:.3f} ms, new {new:.3f} ms per update, new/base {new / base:.2f}")
-    base_commit = subprocess.run(["git", "-C", str(args.base), "rev-parse", "--short", "HEAD"], capture_output=True,
-                                 text=True).stdout.strip()
-    new_commit = subprocess.run(["git", "-C", str(HERE), "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True).stdout.strip()
-    result.update(base_commit=base_commit, new_commit=new_commit, date=datetime.now(timezone.utc).isoformat(),
+    result.update(base_commit=_commit(args.base), new_commit=_commit(HERE), date=datetime.now(timezone.utc).isoformat(),
                   cpu=platform.processor() or platform.machine(), cores=os.cpu_count(),
                   load_average_1min_at_end=round(os.getloadavg()[0], 2))
     if args.json:

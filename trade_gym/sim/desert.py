@@ -98,12 +98,14 @@ def _overtaking(route: CatmullRomSpline, speed: float, rng: np.random.Generator)
     side, lateral = rng.choice([-1.0, 1.0]), rng.uniform(*OVERTAKE_LATERAL_M)
     level_s, ratio = rng.uniform(*OVERTAKE_LEVEL_S), rng.uniform(*OVERTAKE_SPEED_RATIO)
     behind_m = (ratio - 1.0) * speed * level_s + OVERTAKE_LEAD_IN_M  # lane length before the route's start
-    s = np.arange(0.0, route.length_m, LANE_SAMPLE_M)
-    lane = route.position_m(s) + side * lateral * left_normal(route.tangent(s))
-    start = lane[0] - behind_m * route.tangent(0.0)
-    path = CatmullRomSpline(np.vstack([start, lane]))
-    level_at = path.closest(route.position_m(speed * level_s) + side * lateral * left_normal(
-        route.tangent(speed * level_s)))[1][0]
+
+    def in_lane(s_m: np.ndarray) -> np.ndarray:
+        """(N, 2) lane points beside route arc lengths s_m [m]."""
+        return route.position_m(s_m) + side * lateral * left_normal(route.tangent(s_m))
+
+    lane = in_lane(np.arange(0.0, route.length_m, LANE_SAMPLE_M))
+    path = CatmullRomSpline(np.vstack([lane[0] - behind_m * route.tangent(0.0), lane]))
+    level_at = path.closest(in_lane(np.array([speed * level_s])))[1][0]
     return timed_motion(path, speed * ratio, level_at, level_s)
 
 
