@@ -127,6 +127,18 @@ def project_world(K: CameraIntrinsics, T_world_cam: Pose, points_world: FloatArr
     return K.project(T_world_cam.inverse().apply(points_world))
 
 
+def project_covariance(K: CameraIntrinsics, T_world_cam: Pose, point_world: FloatArray,
+                       covariance_world_m2: FloatArray) -> FloatArray:
+    """First-order image covariance (2, 2) [px^2] of a world point (3,) with covariance (3, 3) [m^2]:
+    J R^T C R J^T, J the pinhole projection's Jacobian at the point in the camera frame; NaN behind it."""
+    R_cam_world = T_world_cam.R.T
+    x, y, z = R_cam_world @ (np.asarray(point_world, dtype=np.float64) - T_world_cam.t)
+    if not z > 0:
+        return np.full((2, 2), np.nan)
+    J = np.array([[K.fx_px / z, 0.0, -K.fx_px * x / z**2], [0.0, K.fy_px / z, -K.fy_px * y / z**2]]) @ R_cam_world
+    return J @ np.asarray(covariance_world_m2, dtype=np.float64) @ J.T
+
+
 def quat_xyzw_to_matrix(q: FloatArray) -> FloatArray:
     """Unit quaternion (x, y, z, w) -> 3x3 rotation matrix."""
     x, y, z, w = (float(c) for c in q)

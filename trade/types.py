@@ -65,6 +65,24 @@ def iou(a: npt.ArrayLike, b: npt.ArrayLike) -> float:
     return inter / union if union > 0 else 0.0
 
 
+@dataclass(frozen=True, eq=False)
+class PixelPrediction:
+    """Where the trajectory model puts the target in the image: centre_px (2,), its first-order
+    covariance_px2 (2, 2) [px^2] and its camera-frame depth_m [m]; all NaN when there is no prediction."""
+
+    centre_px: FloatArray
+    covariance_px2: FloatArray
+    depth_m: float
+
+    @classmethod
+    def none(cls) -> PixelPrediction:
+        return cls(np.full(2, np.nan), np.full((2, 2), np.nan), math.nan)
+
+    @property
+    def valid(self) -> bool:
+        return bool(np.all(np.isfinite(self.centre_px)) and np.all(np.isfinite(self.covariance_px2)))
+
+
 @dataclass(frozen=True)
 class ImuBatch:
     """IMU samples delivered with one camera frame.

@@ -46,18 +46,22 @@ class PlanarScene:
     def camera_pose(self, position_m: np.ndarray) -> Pose:
         return Pose(R_WORLD_CAM_DOWN, np.asarray(position_m, dtype=np.float64))
 
-    def texture_with_target(self, target_xy_m: np.ndarray) -> np.ndarray:
-        """The ground texture with the target pasted, centred at target_xy_m (x, y) on the plane [m]."""
+    def texture_with_target(self, target_xy_m: np.ndarray, lookalikes_xy_m: tuple[np.ndarray, ...] = ()) -> np.ndarray:
+        """The ground texture with the target pasted, centred at target_xy_m (x, y) on the plane [m], and
+        identical copies of it at lookalikes_xy_m."""
         ground = self.ground.copy()
         side = self.target.shape[0]
-        col = int(round(target_xy_m[0] / TEXTURE_M_PER_PX + TEXTURE_SIDE_PX / 2 - side / 2))
-        row = int(round(target_xy_m[1] / TEXTURE_M_PER_PX + TEXTURE_SIDE_PX / 2 - side / 2))
-        ground[row:row + side, col:col + side] = self.target
+        for xy in (target_xy_m, *lookalikes_xy_m):
+            col = int(round(xy[0] / TEXTURE_M_PER_PX + TEXTURE_SIDE_PX / 2 - side / 2))
+            row = int(round(xy[1] / TEXTURE_M_PER_PX + TEXTURE_SIDE_PX / 2 - side / 2))
+            ground[row:row + side, col:col + side] = self.target
         return ground
 
-    def render(self, camera_xyz_m: np.ndarray, target_xy_m: np.ndarray) -> np.ndarray:
-        """RGB image from a down-looking camera at camera_xyz_m with the target centred at target_xy_m."""
-        ground = self.texture_with_target(target_xy_m)
+    def render(self, camera_xyz_m: np.ndarray, target_xy_m: np.ndarray,
+               lookalikes_xy_m: tuple[np.ndarray, ...] = ()) -> np.ndarray:
+        """RGB image from a down-looking camera at camera_xyz_m with the target centred at target_xy_m
+        (and identical lookalikes at lookalikes_xy_m)."""
+        ground = self.texture_with_target(target_xy_m, lookalikes_xy_m)
         K = self.intrinsics
         cx, cy, h = camera_xyz_m
         s = TEXTURE_M_PER_PX

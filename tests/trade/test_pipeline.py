@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -67,8 +68,8 @@ def test_pipeline_tracks_through_trajectory_prediction_15px_off():
     target; the tracker keeps the target through the constant-image-velocity window."""
     class OffsetPrediction(TradePipeline):
         def _predict_pixel(self, t_s, T_world_cam):
-            uv = super()._predict_pixel(t_s, T_world_cam)
-            return uv + np.array([15.0, -10.0])
+            prediction = super()._predict_pixel(t_s, T_world_cam)
+            return replace(prediction, centre_px=prediction.centre_px + np.array([15.0, -10.0]))
 
     scene = PlanarScene.make(size_px=128, fov_deg=90.0, seed=3)
     pipeline = OffsetPrediction(PipelineConfig(object_height_m=0.0), scene.intrinsics, np.random.default_rng(3))
@@ -246,7 +247,9 @@ def test_pipeline_redetects_target_away_from_the_coasting_prediction_after_occlu
 @pytest.mark.parametrize("field, value", [("reacquire_rings", -1), ("reacquire_rings", 1.5), ("snap_iterations", -1),
                                           ("snap_max_side_ratio", 0.9),
                                           ("reacquire_step_fraction", 0.0), ("reacquire_min_peak_score", np.nan),
-                                          ("reacquire_confident_score", np.inf)])
+                                          ("reacquire_confident_score", np.inf), ("reacquire_gate_chi2", 0.0),
+                                          ("reacquire_gate_chi2", np.nan), ("reacquire_gate_box_sigma", 0.0),
+                                          ("reacquire_gate_box_sigma", np.inf)])
 def test_pipeline_config_rejects_bad_reacquisition_and_snap_settings(field, value):
     with pytest.raises(ValueError, match=field):
         PipelineConfig(**{field: value})

@@ -10,15 +10,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 import numpy.typing as npt
 
 from trade.tracking.colour_box import ColourBoxRefiner
 from trade.tracking.dcf import DcfTracker
-from trade.tracking.peaks import PeakChoice, highest_peak, select_peak
-from trade.types import BBox
+from trade.tracking.peaks import PeakChoice, highest_peak, peaks_above, select_peak
+from trade.types import BBox, PixelPrediction
 
 if TYPE_CHECKING:
     from trade.pipeline import PipelineConfig
@@ -44,7 +44,8 @@ def _inside(pixel: FloatArray, image_rgb: ImageRGB) -> bool:
 
 
 class GuidedTracker:
-    """`init(image, box)` once, then `step(image, predicted_px)` per frame (prediction NaN when none)."""
+    """`init(image, box)` once, then `step(image, prediction)` per frame (`PixelPrediction.none()` when
+    there is no trajectory prediction)."""
 
     def __init__(self, config: PipelineConfig) -> None:
         self.config = config
@@ -53,6 +54,9 @@ class GuidedTracker:
         self._box: BBox | None = None  # last output box
         self._image_motion_px = np.zeros(2)  # last frame-to-frame shift of the tracked box centre (x, y)
         self._tracked_last = True  # whether the previous frame was tracked (its shift is then current)
+        # at the last tracked frame with a prediction: its depth [m] and the DCF and output box sizes (w, h) [px]
+        self._tracked_depth_m = math.nan
+        self._tracked_sizes_px = (np.zeros(2), np.zeros(2))
         rings = np.arange(-config.reacquire_rings, config.reacquire_rings + 1)
         grid = np.stack(np.meshgrid(rings, rings), axis=-1).reshape(-1, 2).astype(np.float64)
         # (x, y) offsets of the re-detection windows in steps, the centre first
@@ -67,17 +71,19 @@ class GuidedTracker:
         self._box = box
         self._image_motion_px = np.zeros(2)
         self._tracked_last = True
+        self._tracked_depth_m = math.nan
         return box
 
-    def step(self, image_rgb: ImageRGB, predicted_px: FloatArray) -> TrackedFrame:
-        """Track into the next frame; `predicted_px` (2,) is the trajectory prediction (NaN when none)."""
+    def step(self, image_rgb: ImageRGB, prediction: PixelPrediction) -> TrackedFrame:
+        """Track into the next frame, guided by the trajectory model's `prediction`."""
         cfg = self.config
+        predicted_px = prediction.centre_px
         if self._tracked_last or not cfg.trajectory_guidance:
             choice, scale = self._choose_peak(image_rgb, predicted_px)
             tracked = choice.score >= cfg.min_peak_score or not cfg.trajectory_guidance
         else:
-            centre_px = predicted_px if _inside(predicted_px, image_rgb) else self.dcf.box.center
-            choice, scale, tracked = self._redetect(image_rgb, centre_px)
+            self._size_by_depth(prediction.depth_m)
+            choice, scale, tracked = self._redetect(image_rgb, prediction)
         if tracked:
             previous_px = self.dcf.box.center
             dcf_box = self.dcf.commit(choice.location_px, scale)
@@ -91,7 +97,22 @@ class GuidedTracker:
             self._image_motion_px = np.zeros(2)
         self._tracked_last = tracked
         self._box = box
+        if tracked and prediction.depth_m > 0:  # False for NaN
+            self._tracked_depth_m = prediction.depth_m
+            self._tracked_sizes_px = (np.array([self.dcf.box.w_px, self.dcf.box.h_px]), np.array([box.w_px, box.h_px]))
         return TrackedFrame(box, choice, tracked)
+
+    def _size_by_depth(self, depth_m: float) -> None:
+        """While lost, scale the DCF and output boxes from their size at the last tracked frame by the ratio
+        of its predicted depth to `depth_m` (PipelineConfig.coast_scale_from_depth)."""
+        if not (self.config.coast_scale_from_depth and depth_m > 0 and self._tracked_depth_m > 0):
+            return
+        factor = self._tracked_depth_m / depth_m
+        dcf_wh, output_wh = self._tracked_sizes_px
+        box = self.dcf.box
+        self.dcf.commit(box.center, factor * dcf_wh[0] / box.w_px)  # the DCF box scales isotropically
+        centre = self._box.center
+        self._box = BBox.from_center(centre[0], centre[1], factor * output_wh[0], factor * output_wh[1])
 
     def _snapped(self, image_rgb: ImageRGB, box: BBox) -> BBox:
         """The colour blob at the given box's centre, with the colours relearnt from the blob
@@ -137,28 +158,52 @@ class GuidedTracker:
             return alt, alt_scale
         return choice, scale
 
-    def _redetect(self, image_rgb: ImageRGB, centre_px: FloatArray) -> tuple[PeakChoice, float, bool]:
-        """While lost. Candidates: the paper's peak in the window at `centre_px` (the prediction), then the
-        top peaks of the other windows on the grid around it, highest first. The prediction window's peak is
-        taken (tracked) at once if it scores at least reacquire_confident_score (a target re-emerging from
-        under an occluder shows only part of its colour blob); otherwise the first candidate that scores at
-        least reacquire_min_peak_score and whose colour blob passes the refiner's tests; with none, the
-        prediction window's peak (not tracked). Returns the choice, its DSST scale, whether tracked."""
+    def _redetect(self, image_rgb: ImageRGB, prediction: PixelPrediction) -> tuple[PeakChoice, float, bool]:
+        """While lost. The candidates are the peaks scoring at least reacquire_min_peak_score in the window at
+        the prediction (at the last box when the prediction is not in the image) and in the windows on the
+        grid around it, inside the prediction's validation gate. They are tried most probable first: the
+        appearance likelihood exp(score / T) of the paper's softmax times the prediction's Gaussian
+        exp(-d^2 / 2), so a fully visible lookalike beside a target that is only coming out from under an
+        occluder loses to it. A candidate is taken (tracked) when its colour blob passes the refiner's tests,
+        or, in the prediction's window, when it scores at least reacquire_confident_score (a re-emerging
+        target shows only part of its blob). With none, the paper's peak in the prediction's window (not
+        tracked). Returns the choice, its DSST scale, whether tracked."""
         cfg, box = self.config, self.dcf.box
+        centre_px = prediction.centre_px if _inside(prediction.centre_px, image_rgb) else box.center
+        distance2 = self._gate_distance2(prediction)
         step_px = cfg.reacquire_step_fraction * cfg.dcf.padding * np.array([box.w_px, box.h_px])
         centre_response = self.dcf.response(image_rgb, centre_px, with_scale=False)
-        guided = select_peak(centre_response, cfg.peaks)
-        if guided.score >= max(cfg.reacquire_confident_score, cfg.reacquire_min_peak_score):
-            return guided, self.dcf.estimate_scale(image_rgb, guided.location_px), True
-        others = [highest_peak(centre_response, cfg.peaks)]
-        for offset in self._reacquire_offsets[1:]:  # [0] is the centre window
+        ranked: list[tuple[float, bool, PeakChoice]] = []  # (log posterior, in the prediction's window, peak)
+        for offset in self._reacquire_offsets:  # [0] is the prediction's window
             centre = centre_px + offset * step_px
-            if _inside(centre, image_rgb):
-                others.append(highest_peak(self.dcf.response(image_rgb, centre, with_scale=False), cfg.peaks))
-        for choice in [guided, *sorted(others, key=lambda c: -c.score)]:
-            if choice.score >= cfg.reacquire_min_peak_score and self._colour_confirms(image_rgb, choice.location_px):
-                return choice, self.dcf.estimate_scale(image_rgb, choice.location_px), True
-        return guided, 1.0, False
+            central = not offset.any()
+            if not (central or _inside(centre, image_rgb)):
+                continue
+            response = centre_response if central else self.dcf.response(image_rgb, centre, with_scale=False)
+            for peak in peaks_above(response, cfg.reacquire_min_peak_score, cfg.peaks):
+                d2 = distance2(peak.location_px)
+                if d2 <= cfg.reacquire_gate_chi2:
+                    ranked.append((peak.score / cfg.peaks.softmax_temperature - 0.5 * d2, central, peak))
+        for _, central, peak in sorted(ranked, key=lambda r: -r[0]):
+            if ((central and peak.score >= cfg.reacquire_confident_score)
+                    or self._colour_confirms(image_rgb, peak.location_px)):
+                return peak, self.dcf.estimate_scale(image_rgb, peak.location_px), True
+        return select_peak(centre_response, cfg.peaks), 1.0, False
+
+    def _gate_distance2(self, prediction: PixelPrediction) -> Callable[[FloatArray], float]:
+        """Squared Mahalanobis distance d^2 = r^T (C + s^2 I)^-1 r of a pixel from the prediction (see
+        PipelineConfig.reacquire_gate_chi2); 0 everywhere without a prediction."""
+        if not prediction.valid:
+            return lambda location_px: 0.0
+        box = self.dcf.box
+        sigma_px = self.config.reacquire_gate_box_sigma * max(box.w_px, box.h_px)
+        information = np.linalg.inv(prediction.covariance_px2 + sigma_px**2 * np.eye(2))
+
+        def distance2(location_px: FloatArray) -> float:
+            offset = np.asarray(location_px) - prediction.centre_px
+            return float(offset @ information @ offset)
+
+        return distance2
 
     def _colour_confirms(self, image_rgb: ImageRGB, location_px: FloatArray) -> bool:
         """Whether the target's colour model finds a plausible blob of the target's size at `location_px`."""

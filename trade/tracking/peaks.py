@@ -165,6 +165,17 @@ def select_peak(resp: ResponseMap, config: PeakConfig) -> PeakChoice:
     return _choice(resp, candidates[best], prob, len(candidates), config.subcell_refinement)
 
 
+def peaks_above(resp: ResponseMap, min_score: float, config: PeakConfig) -> list[PeakChoice]:
+    """Every NMS peak scoring at least `min_score`, highest first; each flagged ambiguous when there are
+    several (re-detection weighs them against the trajectory prediction itself)."""
+    prob = softmax_map(resp.scores, config.softmax_temperature)
+    peaks = local_maxima(resp.scores, config.nms_radius_cells)
+    peaks = peaks[resp.scores[peaks[:, 0], peaks[:, 1]] >= min_score]
+    order = np.argsort(-resp.scores[peaks[:, 0], peaks[:, 1]], kind="stable")
+    kept = peaks[_suppress_near(peaks, order, config.nms_radius_cells)]
+    return [_choice(resp, cell, prob, len(kept), config.subcell_refinement) for cell in kept]
+
+
 def highest_peak(resp: ResponseMap, config: PeakConfig | None = None) -> PeakChoice:
     """The plain tracker rule ("dcf" baseline): the global maximum wins and is never ambiguous.
 

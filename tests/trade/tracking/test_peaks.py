@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from trade.tracking import PeakConfig, ResponseMap, highest_peak, select_peak
-from trade.tracking.peaks import local_maxima, refine_peak, softmax_map
+from trade.tracking.peaks import local_maxima, peaks_above, refine_peak, softmax_map
 
 MAP_SIDE_CELLS = 25  # origin cell (12, 12)
 PEAK_SIGMA_CELLS = 1.2
@@ -63,6 +63,23 @@ def test_select_peak_flat_topped_peak_counts_once() -> None:
     scores[5, 5:7] = 1.0  # two adjacent cells share the maximum
     choice = select_peak(_response(scores), PeakConfig(subcell_refinement=False))
     assert choice.n_candidates == 1 and not choice.ambiguous
+
+
+def test_peaks_above_lists_every_peak_over_the_score_highest_first() -> None:
+    resp = _response(_bumps([(6, 18, 0.5), (14, 9, 0.9), (20, 20, 0.15)]))
+    peaks = peaks_above(resp, 0.2, PeakConfig())
+    assert [round(p.score, 2) for p in peaks] == [0.9, 0.5]  # the 0.15 bump is below the score
+    for peak, cell in zip(peaks, ([14.0, 9.0], [6.0, 18.0])):
+        np.testing.assert_allclose(peak.location_px, resp.cell_to_image_px(np.array(cell)), atol=0.3)
+        assert peak.ambiguous and peak.n_candidates == 2
+    assert peaks_above(resp, 0.95, PeakConfig()) == []
+
+
+def test_peaks_above_counts_a_flat_top_once() -> None:
+    scores = _bumps([(12, 12, 0.5)])
+    scores[5, 5:7] = 1.0
+    peaks = peaks_above(_response(scores), 0.2, PeakConfig(subcell_refinement=False))
+    assert [p.score for p in peaks] == [1.0, pytest.approx(0.5, abs=1e-3)]
 
 
 def test_select_peak_lower_temperature_drops_weaker_candidate() -> None:

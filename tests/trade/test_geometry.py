@@ -1,0 +1,30 @@
+"""Tests of the camera geometry helpers that have no other home: the projected covariance."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from trade.geometry import CameraIntrinsics, Pose, project_covariance, project_world, rotation_z
+
+SAMPLES = 200_000
+
+
+def test_project_covariance_matches_the_spread_of_projected_samples() -> None:
+    """For a small world covariance the first-order image covariance equals the sample covariance of the
+    projected points (a tilted, yawed camera 20 m up; a point off the optical axis)."""
+    K = CameraIntrinsics.from_fov(160, 120, 70.0)
+    tilt = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(2.8), -np.sin(2.8)], [0.0, np.sin(2.8), np.cos(2.8)]])
+    T_world_cam = Pose(rotation_z(0.6) @ tilt, np.array([3.0, -2.0, 20.0]))
+    point = np.array([6.0, 1.0, 0.5])
+    C = np.array([[0.04, 0.01, 0.0], [0.01, 0.09, 0.005], [0.0, 0.005, 0.02]])
+    rng = np.random.default_rng(0)
+    pixels = project_world(K, T_world_cam, rng.multivariate_normal(point, C, SAMPLES))
+    assert np.isfinite(pixels).all()  # every sample in front of the camera
+    np.testing.assert_allclose(project_covariance(K, T_world_cam, point, C), np.cov(pixels.T), rtol=0.03)
+
+
+def test_project_covariance_is_nan_behind_the_camera() -> None:
+    K = CameraIntrinsics.from_fov(64, 64, 90.0)
+    T_world_cam = Pose(np.diag([1.0, -1.0, -1.0]), np.array([0.0, 0.0, 10.0]))  # looking down
+    assert np.isnan(project_covariance(K, T_world_cam, np.array([0.0, 0.0, 12.0]), np.eye(3))).all()
+    assert np.isfinite(project_covariance(K, T_world_cam, np.zeros(3), np.eye(3))).all()
