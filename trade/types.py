@@ -68,15 +68,17 @@ def iou(a: npt.ArrayLike, b: npt.ArrayLike) -> float:
 @dataclass(frozen=True, eq=False)
 class PixelPrediction:
     """Where the trajectory model puts the target in the image: centre_px (2,), its first-order
-    covariance_px2 (2, 2) [px^2] and its camera-frame depth_m [m]; all NaN when there is no prediction."""
+    covariance_px2 (2, 2) [px^2], its camera-frame depth_m [m] and that depth's 1-sigma depth_sigma_m [m];
+    all NaN when there is no prediction."""
 
     centre_px: FloatArray
     covariance_px2: FloatArray
     depth_m: float
+    depth_sigma_m: float
 
     @classmethod
     def none(cls) -> PixelPrediction:
-        return cls(np.full(2, np.nan), np.full((2, 2), np.nan), math.nan)
+        return cls(np.full(2, np.nan), np.full((2, 2), np.nan), math.nan, math.nan)
 
     @property
     def valid(self) -> bool:

@@ -8,10 +8,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import pytest
 
 from tests.trade.planar_scene import PlanarScene
 from trade.pipeline import PipelineConfig, TradePipeline
-from trade.types import BBox, iou
+from trade.tracking import GuidedTracker
+from trade.types import BBox, PixelPrediction, iou
 
 ALTITUDE_M = 15.0  # the 4 m target is ~17 px across at 128 px, 90 deg
 FPS = 30.0
@@ -90,3 +92,33 @@ def test_reacquisition_sizes_the_boxes_by_the_predicted_depth_after_a_climb():
     assert all(r.tracked and r.iou_target >= 0.8 for r in _back(records))
     unscaled = _occlusion_run(PipelineConfig(object_height_m=0.0, coast_scale_from_depth=False), climb_m=CLIMB_M)
     assert all(r.iou_target < 0.5 for r in _back(unscaled)[:5])
+
+
+def _lost_tracker(config: PipelineConfig) -> tuple[GuidedTracker, BBox, np.ndarray]:
+    """A tracker that learnt the planar scene's target at 15 m (prediction at 15 m, sigma 0.5 m), then lost
+    it on a blank frame; its last tracked output box; the blank frame."""
+    scene = PlanarScene.make(size_px=128, fov_deg=90.0, seed=0)
+    cam, target = np.array([0.0, 0.0, ALTITUDE_M]), np.zeros(2)
+    image, gt = scene.render(cam, target), scene.target_box(cam, target)
+    centre = gt[:2] + gt[2:] / 2
+    tracker = GuidedTracker(config)
+    tracker.init(image, BBox.from_array(gt))
+    tracked = tracker.step(image, PixelPrediction(centre, np.eye(2), ALTITUDE_M, 0.5))
+    assert tracked.tracked
+    blank = np.full_like(image, OCCLUDER_GREY)
+    assert not tracker.step(blank, PixelPrediction(centre, np.eye(2), ALTITUDE_M, 0.5)).tracked
+    return tracker, tracked.box, blank
+
+
+def test_coasting_boxes_follow_the_predicted_depth_only_while_it_is_known():
+    config = PipelineConfig()
+    tracker, tracked_box, blank = _lost_tracker(config)
+    size_px = np.array([tracker.dcf.box.w_px, tracker.dcf.box.h_px])
+    centre = tracker.dcf.box.center
+    coasting = tracker.step(blank, PixelPrediction(centre, np.eye(2), 2 * ALTITUDE_M, 1.0)).box
+    np.testing.assert_allclose([tracker.dcf.box.w_px, tracker.dcf.box.h_px], size_px / 2)  # twice as deep
+    assert (coasting.w_px, coasting.h_px) == pytest.approx((tracked_box.w_px / 2, tracked_box.h_px / 2))
+    tracker, _, blank = _lost_tracker(config)
+    uncertain = config.coast_scale_max_relative_sigma * 2 * ALTITUDE_M * 1.01
+    tracker.step(blank, PixelPrediction(centre, np.eye(2), 2 * ALTITUDE_M, uncertain))
+    np.testing.assert_allclose([tracker.dcf.box.w_px, tracker.dcf.box.h_px], size_px)  # depth not known: kept

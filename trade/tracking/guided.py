@@ -82,7 +82,7 @@ class GuidedTracker:
             choice, scale = self._choose_peak(image_rgb, predicted_px)
             tracked = choice.score >= cfg.min_peak_score or not cfg.trajectory_guidance
         else:
-            self._size_by_depth(prediction.depth_m)
+            self._size_by_depth(prediction)
             choice, scale, tracked = self._redetect(image_rgb, prediction)
         if tracked:
             previous_px = self.dcf.box.center
@@ -97,17 +97,24 @@ class GuidedTracker:
             self._image_motion_px = np.zeros(2)
         self._tracked_last = tracked
         self._box = box
-        if tracked and prediction.depth_m > 0:  # False for NaN
-            self._tracked_depth_m = prediction.depth_m
+        if tracked:
+            self._tracked_depth_m = prediction.depth_m if self._depth_known(prediction) else math.nan
             self._tracked_sizes_px = (np.array([self.dcf.box.w_px, self.dcf.box.h_px]), np.array([box.w_px, box.h_px]))
         return TrackedFrame(box, choice, tracked)
 
-    def _size_by_depth(self, depth_m: float) -> None:
+    def _depth_known(self, prediction: PixelPrediction) -> bool:
+        """Whether the prediction's depth is positive and known to coast_scale_max_relative_sigma (False
+        for NaN)."""
+        return bool(prediction.depth_m > 0
+                    and prediction.depth_sigma_m <= self.config.coast_scale_max_relative_sigma * prediction.depth_m)
+
+    def _size_by_depth(self, prediction: PixelPrediction) -> None:
         """While lost, scale the DCF and output boxes from their size at the last tracked frame by the ratio
-        of its predicted depth to `depth_m` (PipelineConfig.coast_scale_from_depth)."""
-        if not (self.config.coast_scale_from_depth and depth_m > 0 and self._tracked_depth_m > 0):
+        of that frame's predicted depth to this one's (PipelineConfig.coast_scale_from_depth), when both
+        are known."""
+        if not (self.config.coast_scale_from_depth and self._tracked_depth_m > 0 and self._depth_known(prediction)):
             return
-        factor = self._tracked_depth_m / depth_m
+        factor = self._tracked_depth_m / prediction.depth_m
         dcf_wh, output_wh = self._tracked_sizes_px
         box = self.dcf.box
         self.dcf.commit(box.center, factor * dcf_wh[0] / box.w_px)  # the DCF box scales isotropically
