@@ -1,16 +1,18 @@
-"""The image side of TRADE: the correlation filter guided by a predicted pixel, per frame.
+"""The image side of TRADE: the correlation filter guided by the trajectory prediction, per frame.
 
 Owns the DCF and the colour model, the choice of a peak near the trajectory prediction (with the
-constant-image-velocity window as a second opinion), re-detection while lost, the output box (colour-blob
-refinement, or coasting on the prediction) and the optional snapping of the initial box. The settings are
-the tracking fields of `trade.pipeline.PipelineConfig`.
+constant-image-velocity window as a second opinion), re-detection while lost (inside the prediction's
+validation gate, with the boxes sized by its depth), the output box (colour-blob refinement, or coasting on
+the prediction) and the optional snapping of the initial box. The settings are the tracking fields of
+`trade.pipeline.PipelineConfig`.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
