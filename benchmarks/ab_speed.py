@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import platform
 import statistics
 import subprocess
 import sys
@@ -56,6 +57,13 @@ def _commit(tree: Path) -> str:
                               text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
+
+
+def run_meta(base: Path) -> dict:
+    """What a before/after benchmark records beside its numbers: both commits, date, CPU, cores, load."""
+    return dict(base_commit=_commit(base), new_commit=_commit(HERE), date=datetime.now(timezone.utc).isoformat(),
+                cpu=platform.processor() or platform.machine(), cores=os.cpu_count(),
+                load_average_1min_at_end=round(os.getloadavg()[0], 2))
 
 
 def main() -> None:

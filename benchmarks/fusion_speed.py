@@ -14,17 +14,14 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
-import os
-import platform
 import statistics
 import sys
 import time
-from datetime import datetime, timezone
 from pathlib import Path
 from types import ModuleType
 
 import numpy as np
-from ab_speed import _commit  # benchmarks/ is on sys.path when this script runs
+from ab_speed import run_meta  # benchmarks/ is on sys.path when this script runs
 
 
 HERE = Path(__file__).resolve().parents[1]
@@ -83,9 +80,7 @@ def main() -> None:
         result["cases"][case] = {"points_per_frame": n, "base_ms": round(base, 3), "new_ms": round(new, 3),
                                  "ratio_new_over_base": round(new / base, 3)}
         print(f"{case} ({n} points/frame): base {base:.3f} ms, new {new:.3f} ms per update, new/base {new / base:.2f}")
-    result.update(base_commit=_commit(args.base), new_commit=_commit(HERE), date=datetime.now(timezone.utc).isoformat(),
-                  cpu=platform.processor() or platform.machine(), cores=os.cpu_count(),
-                  load_average_1min_at_end=round(os.getloadavg()[0], 2))
+    result.update(run_meta(args.base))
     if args.json:
         args.json.write_text(json.dumps(result, indent=2) + "\n")
 

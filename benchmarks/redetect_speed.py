@@ -15,14 +15,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
-from datetime import datetime, timezone
 from pathlib import Path
 
-from ab_speed import _commit  # benchmarks/ is on sys.path when this script runs
+from ab_speed import run_meta  # benchmarks/ is on sys.path when this script runs
 
 HERE = Path(__file__).resolve().parents[1]
 
@@ -67,6 +65,8 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
+    if not (args.base / "trade" / "pipeline.py").is_file():
+        parser.error(f"--base {args.base} holds no trade package")
     trees = {"base": args.base.resolve(), "new": HERE}
     runs: dict[str, list[dict]] = {name: [] for name in trees}
     for _ in range(args.rounds):
@@ -79,9 +79,7 @@ def main() -> None:
         new = statistics.median(r[kind] for r in runs["new"])
         result[kind] = {"base": round(base, 3), "new": round(new, 3), "ratio_new_over_base": round(new / base, 3)}
         print(f"{kind.removesuffix('_ms')} frames: base {base:.2f} ms, new {new:.2f} ms, new/base {new / base:.2f}")
-    result.update(base_commit=_commit(args.base), new_commit=_commit(HERE), date=datetime.now(timezone.utc).isoformat(),
-                  cpu=platform.processor() or platform.machine(), cores=os.cpu_count(),
-                  load_average_1min_at_end=round(os.getloadavg()[0], 2))
+    result.update(run_meta(args.base))
     if args.json:
         args.json.write_text(json.dumps(result, indent=2) + "\n")
 
