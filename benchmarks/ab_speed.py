@@ -59,6 +59,12 @@ def _commit(tree: Path) -> str:
         return "unknown"
 
 
+def median_ratio(base: list[float], new: list[float]) -> tuple[float, float, float]:
+    """Median of the base tree's and of this tree's measurements, and new / base of the medians."""
+    base_median, new_median = statistics.median(base), statistics.median(new)
+    return base_median, new_median, new_median / base_median
+
+
 def run_meta(base: Path) -> dict:
     """What a before/after benchmark records beside its numbers: both commits, date, CPU, cores, load."""
     return dict(base_commit=_commit(base), new_commit=_commit(HERE), date=datetime.now(timezone.utc).isoformat(),

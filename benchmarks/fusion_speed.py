@@ -14,14 +14,13 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
-import statistics
 import sys
 import time
 from pathlib import Path
 from types import ModuleType
 
 import numpy as np
-from ab_speed import run_meta  # benchmarks/ is on sys.path when this script runs
+from ab_speed import median_ratio, run_meta  # benchmarks/ is on sys.path when this script runs
 
 
 HERE = Path(__file__).resolve().parents[1]
@@ -76,10 +75,10 @@ def main() -> None:
         for _ in range(args.rounds):
             for name, module in trees.items():
                 times[name].append(_ms_per_update(module, frames))
-        base, new = statistics.median(times["base"]), statistics.median(times["new"])
+        base, new, ratio = median_ratio(times["base"], times["new"])
         result["cases"][case] = {"points_per_frame": n, "base_ms": round(base, 3), "new_ms": round(new, 3),
-                                 "ratio_new_over_base": round(new / base, 3)}
-        print(f"{case} ({n} points/frame): base {base:.3f} ms, new {new:.3f} ms per update, new/base {new / base:.2f}")
+                                 "ratio_new_over_base": round(ratio, 3)}
+        print(f"{case} ({n} points/frame): base {base:.3f} ms, new {new:.3f} ms per update, new/base {ratio:.2f}")
     result.update(run_meta(args.base))
     if args.json:
         args.json.write_text(json.dumps(result, indent=2) + "\n")

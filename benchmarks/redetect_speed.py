@@ -15,12 +15,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 from pathlib import Path
 
-from ab_speed import run_meta  # benchmarks/ is on sys.path when this script runs
+from ab_speed import median_ratio, run_meta  # benchmarks/ is on sys.path when this script runs
 
 HERE = Path(__file__).resolve().parents[1]
 
@@ -75,10 +74,9 @@ def main() -> None:
     counts = {key: runs["new"][-1][key] for key in ("tracked_frames", "lost_frames")}
     result: dict = {"what": __doc__.splitlines()[0], "rounds": args.rounds, "frames": counts}
     for kind in ("tracked_ms", "lost_ms"):
-        base = statistics.median(r[kind] for r in runs["base"])
-        new = statistics.median(r[kind] for r in runs["new"])
-        result[kind] = {"base": round(base, 3), "new": round(new, 3), "ratio_new_over_base": round(new / base, 3)}
-        print(f"{kind.removesuffix('_ms')} frames: base {base:.2f} ms, new {new:.2f} ms, new/base {new / base:.2f}")
+        base, new, ratio = median_ratio([r[kind] for r in runs["base"]], [r[kind] for r in runs["new"]])
+        result[kind] = {"base": round(base, 3), "new": round(new, 3), "ratio_new_over_base": round(ratio, 3)}
+        print(f"{kind.removesuffix('_ms')} frames: base {base:.2f} ms, new {new:.2f} ms, new/base {ratio:.2f}")
     result.update(run_meta(args.base))
     if args.json:
         args.json.write_text(json.dumps(result, indent=2) + "\n")

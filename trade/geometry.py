@@ -61,6 +61,15 @@ class CameraIntrinsics:
         uv[~ahead] = np.nan
         return uv
 
+    def project_covariance(self, point_cam: FloatArray, covariance_cam_m2: FloatArray) -> FloatArray:
+        """First-order image covariance (2, 2) [px^2] of a camera-frame point (3,) [m] with camera-frame
+        covariance (3, 3) [m^2]: J C J^T, J the projection's Jacobian at the point; NaN behind the camera."""
+        x, y, z = (float(v) for v in np.ravel(point_cam))
+        if not z > 0:
+            return np.full((2, 2), np.nan)
+        J = np.array([[self.fx_px / z, 0.0, -self.fx_px * x / z**2], [0.0, self.fy_px / z, -self.fy_px * y / z**2]])
+        return J @ np.asarray(covariance_cam_m2, dtype=np.float64) @ J.T
+
     def rays(self, pixels: FloatArray) -> FloatArray:
         """pixels: (N, 2) -> (N, 3) camera-frame rays with z = 1."""
         px = np.atleast_2d(np.asarray(pixels, dtype=np.float64))
@@ -125,18 +134,6 @@ class Pose:
 def project_world(K: CameraIntrinsics, T_world_cam: Pose, points_world: FloatArray) -> FloatArray:
     """World points (N, 3) [m] -> pixels (N, 2); NaN behind the camera."""
     return K.project(T_world_cam.inverse().apply(points_world))
-
-
-def project_covariance(K: CameraIntrinsics, T_world_cam: Pose, point_world: FloatArray,
-                       covariance_world_m2: FloatArray) -> FloatArray:
-    """First-order image covariance (2, 2) [px^2] of a world point (3,) with covariance (3, 3) [m^2]:
-    J R^T C R J^T, J the pinhole projection's Jacobian at the point in the camera frame; NaN behind it."""
-    R_cam_world = T_world_cam.R.T
-    x, y, z = R_cam_world @ (np.asarray(point_world, dtype=np.float64) - T_world_cam.t)
-    if not z > 0:
-        return np.full((2, 2), np.nan)
-    J = np.array([[K.fx_px / z, 0.0, -K.fx_px * x / z**2], [0.0, K.fy_px / z, -K.fy_px * y / z**2]]) @ R_cam_world
-    return J @ np.asarray(covariance_world_m2, dtype=np.float64) @ J.T
 
 
 def quat_xyzw_to_matrix(q: FloatArray) -> FloatArray:

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from trade.depth_only import DepthOnlyConfig, DepthOnlyLocaliser
-from trade.geometry import CameraIntrinsics, Pose, project_covariance
+from trade.geometry import CameraIntrinsics, Pose
 from trade.ground_filter import DepthPredictor, GroundFilter, GroundFilterConfig
 from trade.planes import MultiRansacConfig, Plane, multi_ransac
 from trade.raycast import RaycastConfig, depth_uncertainty, raycast_plane
@@ -280,13 +280,12 @@ class TradePipeline:
         if not self.trajectory.initialized:
             return PixelPrediction.none()
         state = self.trajectory.predict(t_s)
-        position_cam_m = T_world_cam.inverse().apply(state.position_m.reshape(1, 3))
-        covariance_m2 = state.covariance[:3, :3]
-        centre_px = self.intrinsics.project(position_cam_m)[0]
-        covariance_px2 = project_covariance(self.intrinsics, T_world_cam, state.position_m, covariance_m2)
-        optical_axis = T_world_cam.R[:, 2]  # world direction of camera z
-        depth_sigma_m = math.sqrt(float(optical_axis @ covariance_m2 @ optical_axis))
-        return PixelPrediction(centre_px, covariance_px2, float(position_cam_m[0, 2]), depth_sigma_m)
+        T_cam_world = T_world_cam.inverse()
+        position_cam_m = T_cam_world.apply(state.position_m)[0]
+        covariance_cam_m2 = T_cam_world.R @ state.covariance[:3, :3] @ T_cam_world.R.T
+        return PixelPrediction(self.intrinsics.project(position_cam_m)[0],
+                               self.intrinsics.project_covariance(position_cam_m, covariance_cam_m2),
+                               float(position_cam_m[2]), math.sqrt(covariance_cam_m2[2, 2]))
 
     def _ground_points(self, image_rgb: npt.NDArray[np.uint8], box: BBox | None, roi: RoiFeatures,
                        T_world_cam: Pose) -> tuple[FloatArray, float]:

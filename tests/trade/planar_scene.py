@@ -15,6 +15,8 @@ TEXTURE_M_PER_PX = 0.05
 TEXTURE_SIDE_PX = 2400  # 120 m of ground
 TARGET_SIDE_M = 4.0
 TEXTURE_CELL_PX = 10
+OCCLUDER_SCALE = 1.5  # an occluding grey patch covers the target's box scaled by this
+OCCLUDER_GREY = 128
 # Camera looking straight down, image top towards world +x: x_cam = -y_world, y_cam = -x_world.
 R_WORLD_CAM_DOWN = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
@@ -83,3 +85,11 @@ class PlanarScene:
         x0, y0 = uv.min(axis=0)
         x1, y1 = uv.max(axis=0)
         return np.array([x0, y0, x1 - x0, y1 - y0])
+
+
+def occlude(image: np.ndarray, box_xywh: np.ndarray) -> None:
+    """Paint a grey patch over the box (x, y, w, h) [px] scaled by OCCLUDER_SCALE about its centre, in place."""
+    centre, size = box_xywh[:2] + box_xywh[2:] / 2, OCCLUDER_SCALE * box_xywh[2:]
+    lo = np.floor(centre - size / 2).clip(0).astype(int)
+    hi = np.ceil(centre + size / 2).astype(int)
+    image[lo[1]:hi[1], lo[0]:hi[0]] = OCCLUDER_GREY

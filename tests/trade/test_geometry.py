@@ -1,12 +1,20 @@
-"""Tests of the camera geometry helpers that have no other home: the projected covariance."""
+"""Tests of the camera geometry helpers that have no other home: the projected covariance
+(`CameraIntrinsics.project_covariance`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from trade.geometry import CameraIntrinsics, Pose, project_covariance, project_world, rotation_z
+from trade.geometry import CameraIntrinsics, Pose, project_world, rotation_z
 
 SAMPLES = 200_000
+
+
+def _project_covariance(K: CameraIntrinsics, T_world_cam: Pose, point_world: np.ndarray,
+                        C_world: np.ndarray) -> np.ndarray:
+    """The image covariance of a world point: its camera-frame point and covariance through K."""
+    T_cam_world = T_world_cam.inverse()
+    return K.project_covariance(T_cam_world.apply(point_world)[0], T_cam_world.R @ C_world @ T_cam_world.R.T)
 
 
 def test_project_covariance_matches_the_spread_of_projected_samples() -> None:
@@ -20,11 +28,11 @@ def test_project_covariance_matches_the_spread_of_projected_samples() -> None:
     rng = np.random.default_rng(0)
     pixels = project_world(K, T_world_cam, rng.multivariate_normal(point, C, SAMPLES))
     assert np.isfinite(pixels).all()  # every sample in front of the camera
-    np.testing.assert_allclose(project_covariance(K, T_world_cam, point, C), np.cov(pixels.T), rtol=0.03)
+    np.testing.assert_allclose(_project_covariance(K, T_world_cam, point, C), np.cov(pixels.T), rtol=0.03)
 
 
 def test_project_covariance_is_nan_behind_the_camera() -> None:
     K = CameraIntrinsics.from_fov(64, 64, 90.0)
     T_world_cam = Pose(np.diag([1.0, -1.0, -1.0]), np.array([0.0, 0.0, 10.0]))  # looking down
-    assert np.isnan(project_covariance(K, T_world_cam, np.array([0.0, 0.0, 12.0]), np.eye(3))).all()
-    assert np.isfinite(project_covariance(K, T_world_cam, np.zeros(3), np.eye(3))).all()
+    assert np.isnan(_project_covariance(K, T_world_cam, np.array([0.0, 0.0, 12.0]), np.eye(3))).all()
+    assert np.isfinite(_project_covariance(K, T_world_cam, np.zeros(3), np.eye(3))).all()

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from tests.trade.planar_scene import (
-    R_WORLD_CAM_DOWN, TARGET_SIDE_M, TEXTURE_M_PER_PX, TEXTURE_SIDE_PX, PlanarScene,
+    R_WORLD_CAM_DOWN, TARGET_SIDE_M, TEXTURE_M_PER_PX, TEXTURE_SIDE_PX, PlanarScene, occlude,
 )
 from trade.geometry import Pose
 from trade.pipeline import PipelineConfig, TradePipeline
@@ -199,8 +199,6 @@ def test_pipeline_ground_mask_without_depth_model_is_refused():
 
 OCCLUDE_AT_FRAME = 45
 OCCLUDED_FRAMES = 40
-OCCLUDER_SCALE = 1.5  # the grey patch covers the target's box scaled by this
-OCCLUDER_GREY = 128
 
 
 def _turning_target_xy(k: int) -> np.ndarray:
@@ -222,9 +220,7 @@ def _occluded_turn(config: PipelineConfig) -> list[tuple[bool, bool, float, np.n
         occluded = OCCLUDE_AT_FRAME <= k < OCCLUDE_AT_FRAME + OCCLUDED_FRAMES
         centre = gt[:2] + gt[2:] / 2
         if occluded:
-            lo = np.floor(centre - OCCLUDER_SCALE * gt[2:] / 2).clip(0).astype(int)
-            hi = np.ceil(centre + OCCLUDER_SCALE * gt[2:] / 2).astype(int)
-            image[lo[1]:hi[1], lo[0]:hi[0]] = OCCLUDER_GREY
+            occlude(image, gt)
         est = pipeline.initialise(image, BBox.from_array(gt), pose, k / FPS) if k == 0 else pipeline.step(image, pose, k / FPS)
         records.append((occluded, est.tracked, iou(est.box.as_array(), gt) if est.box is not None else 0.0,
                         est.predicted_px, centre))

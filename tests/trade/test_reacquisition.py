@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from tests.trade.planar_scene import PlanarScene
+from tests.trade.planar_scene import OCCLUDER_GREY, PlanarScene, occlude
 from trade.pipeline import PipelineConfig, TradePipeline
 from trade.tracking import GuidedTracker
 from trade.types import BBox, PixelPrediction, iou
@@ -21,8 +21,6 @@ SPEED_MPS = 2.2  # target and camera along +x
 OCCLUDE_AT_FRAME = 60  # 2 s of tracking first, so the trajectory model has converged
 OCCLUDED_FRAMES = 30
 FRAMES_AFTER = 15
-OCCLUDER_SCALE = 1.5  # the grey patch covers the target's box scaled by this
-OCCLUDER_GREY = 128
 LANE_OFFSET_M = 6.0  # centre to centre: the 4 m cars 2 m apart, ~26 px in the image
 OVERTAKE_SPEED_MPS = 3.3  # level with the target when it is hidden, then passing it
 CLIMB_M = 10.0  # during the occlusion: the target's box shrinks from ~17 to ~10 px
@@ -54,10 +52,7 @@ def _occlusion_run(config: PipelineConfig, lane_offset_m: float | None = None, c
         image, pose, gt = scene.render(cam, target, lookalikes), scene.camera_pose(cam), scene.target_box(cam, target)
         occluded = OCCLUDE_AT_FRAME <= k < OCCLUDE_AT_FRAME + OCCLUDED_FRAMES
         if occluded:
-            centre = gt[:2] + gt[2:] / 2
-            lo = np.floor(centre - OCCLUDER_SCALE * gt[2:] / 2).clip(0).astype(int)
-            hi = np.ceil(centre + OCCLUDER_SCALE * gt[2:] / 2).astype(int)
-            image[lo[1]:hi[1], lo[0]:hi[0]] = OCCLUDER_GREY
+            occlude(image, gt)
         est = pipeline.initialise(image, BBox.from_array(gt), pose, t_s) if k == 0 else pipeline.step(image, pose, t_s)
         box = est.box.as_array() if est.box is not None else None
         records.append(Record(

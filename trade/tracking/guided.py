@@ -56,9 +56,8 @@ class GuidedTracker:
         self._box: BBox | None = None  # last output box
         self._image_motion_px = np.zeros(2)  # last frame-to-frame shift of the tracked box centre (x, y)
         self._tracked_last = True  # whether the previous frame was tracked (its shift is then current)
-        # at the last tracked frame with a prediction: its depth [m] and the DCF and output box sizes (w, h) [px]
-        self._tracked_depth_m = math.nan
-        self._tracked_sizes_px = (np.zeros(2), np.zeros(2))
+        # the last tracked frame's prediction, DCF box and output box (the sizes depth scaling starts from)
+        self._last_tracked: tuple[PixelPrediction, BBox, BBox] | None = None
         rings = np.arange(-config.reacquire_rings, config.reacquire_rings + 1)
         grid = np.stack(np.meshgrid(rings, rings), axis=-1).reshape(-1, 2).astype(np.float64)
         # (x, y) offsets of the re-detection windows in steps, the centre first
@@ -73,7 +72,7 @@ class GuidedTracker:
         self._box = box
         self._image_motion_px = np.zeros(2)
         self._tracked_last = True
-        self._tracked_depth_m = math.nan
+        self._last_tracked = (PixelPrediction.none(), box, box)
         return box
 
     def step(self, image_rgb: ImageRGB, prediction: PixelPrediction) -> TrackedFrame:
@@ -100,8 +99,7 @@ class GuidedTracker:
         self._tracked_last = tracked
         self._box = box
         if tracked:
-            self._tracked_depth_m = prediction.depth_m if self._depth_known(prediction) else math.nan
-            self._tracked_sizes_px = (np.array([self.dcf.box.w_px, self.dcf.box.h_px]), np.array([box.w_px, box.h_px]))
+            self._last_tracked = (prediction, self.dcf.box, box)
         return TrackedFrame(box, choice, tracked)
 
     def _depth_known(self, prediction: PixelPrediction) -> bool:
@@ -114,14 +112,14 @@ class GuidedTracker:
         """While lost, scale the DCF and output boxes from their size at the last tracked frame by the ratio
         of that frame's predicted depth to this one's (PipelineConfig.coast_scale_from_depth), when both
         are known."""
-        if not (self.config.coast_scale_from_depth and self._tracked_depth_m > 0 and self._depth_known(prediction)):
+        then, dcf_then, output_then = self._last_tracked
+        if not (self.config.coast_scale_from_depth and self._depth_known(then) and self._depth_known(prediction)):
             return
-        factor = self._tracked_depth_m / prediction.depth_m
-        dcf_wh, output_wh = self._tracked_sizes_px
+        factor = then.depth_m / prediction.depth_m
         box = self.dcf.box
-        self.dcf.commit(box.center, factor * dcf_wh[0] / box.w_px)  # the DCF box scales isotropically
+        self.dcf.commit(box.center, factor * dcf_then.w_px / box.w_px)  # the DCF box scales isotropically
         centre = self._box.center
-        self._box = BBox.from_center(centre[0], centre[1], factor * output_wh[0], factor * output_wh[1])
+        self._box = BBox.from_center(centre[0], centre[1], factor * output_then.w_px, factor * output_then.h_px)
 
     def _snapped(self, image_rgb: ImageRGB, box: BBox) -> BBox:
         """The colour blob at the given box's centre, with the colours relearnt from the blob
