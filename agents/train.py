@@ -21,6 +21,7 @@ import numpy as np
 from agents.obs_flatten import FlatObservation
 from agents.training_env import SceneRandomizedEnv, ZeroYawAction
 from agents.warm_start import WarmStartConfig
+from trade_gym.bench.splits import require_training_worlds
 from trade_gym.config import SCENE_NAMES
 
 ALGOS = ("ppo", "sac")
@@ -110,6 +111,9 @@ class TrainConfig:
                              f"{self.checkpoint_every_steps!r} and {self.verbose!r}")
         if not self.hidden_units or any(int(h) < 1 for h in self.hidden_units):
             raise ValueError(f"TrainConfig.hidden_units must be positive layer widths, got {self.hidden_units!r}")
+        world_seed = dict(self.env_kwargs).get("world_seed")
+        if world_seed is not None:  # training draws its worlds from the training split; a fixed one must be too
+            require_training_worlds([world_seed], "TrainConfig.env_kwargs world_seed")
 
 
 def make_training_env(config: TrainConfig, rank: int, flat: bool = True) -> Callable[[], gym.Env]:

@@ -9,16 +9,17 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from trade_gym.bench.splits import TRAINING
 from trade_gym.env import TradeFollowEnv
 from trade_gym.sim.scenes import get_scene
 
-SEED_SPACE = 2**31 - 1  # world seeds drawn per episode from [0, SEED_SPACE)
 MIN_START_HEIGHT_M = 1.0  # floor of the reset height used to normalise the height-hold term
 TRAIN_ACTION_DIM = 3  # forward, left, up; the yaw rate is held at 0 (rotating the image hurts the tracker)
 
 
 class SceneRandomizedEnv(gym.Env):
-    """TradeFollow-v0 with the scene and the world seed drawn per episode from this env's generator.
+    """TradeFollow-v0 with the scene and the world seed (from the training split) drawn per episode from this
+    env's generator.
 
     One inner env per scene (built on first use); `reset(seed=s)` reseeds the draws. Adds the
     training-only term `- distance_weight * horizontal distance / follow height` to the reward and, unless
@@ -49,7 +50,7 @@ class SceneRandomizedEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         self.scene = self.scenes[int(self.np_random.integers(len(self.scenes)))]
-        world_seed = int(self.np_random.integers(SEED_SPACE))
+        world_seed = int(self.np_random.integers(TRAINING.first, TRAINING.last + 1))  # training worlds only
         obs, info = self._env(self.scene).reset(seed=world_seed, options=options)
         self._start_height_m = max(_height_above_target(info), MIN_START_HEIGHT_M)
         return obs, {**info, "scene": self.scene, "world_seed": world_seed}

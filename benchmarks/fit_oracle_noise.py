@@ -4,8 +4,11 @@ Records every frame's estimate beside the ground truth, measures the error stati
 (box jitter, position error over depth, velocity error, their time correlation, dropouts, the delay before
 the first 3D fix), fits them per scene and writes the median over scenes as the `oracle_*` defaults.
 
-Usage: python benchmarks/fit_oracle_noise.py --scenes desert city mountain --seeds 0 1 2 --steps 300 \
-           --json benchmarks/results/oracle_noise_fit.json
+Flies training worlds only (reset seed = world seed, from `trade_gym.bench.splits.TRAINING`); the default
+perception is the env's, full TRADE.
+
+Usage: python benchmarks/fit_oracle_noise.py --scenes desert city mountain --seeds 10000 10001 10002 \
+           --steps 300 --json benchmarks/results/oracle_noise_fit.json
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import numpy as np
 
 from agents import ScriptedFollower
 from trade_gym import metrics
+from trade_gym.bench.splits import TRAINING, require_training_worlds
 from trade_gym.config import CAMERA_RATE_HZ
 from trade_gym.env import TradeFollowEnv
 from trade_gym.ground_truth import GroundTruth
@@ -163,11 +167,16 @@ def machine_meta() -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", nargs="+", default=["desert", "city", "mountain"])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--seeds", type=int, nargs="+", default=list(TRAINING.seeds(3)),
+                        help="reset seeds, which draw the worlds: training worlds only")
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--camera-size", type=int, default=256)
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()
+    try:
+        require_training_worlds(args.seeds, "--seeds")
+    except ValueError as exc:
+        parser.error(str(exc))
     logs, runs = [], []
     for scene in args.scenes:
         for seed in args.seeds:

@@ -8,7 +8,8 @@ world. The same generator then draws `views_per_world` views: a time t ~ U(0, du
 a camera xy, either around the target at t (probability `p_near_target`) or around the drone start, offset by
 U(0, `xy_radius_m`) in a uniform direction; an altitude U(12, 40) m above `world.surface_height_m` (roofs
 included); a yaw U(-pi, pi); a mount pitch U(60, 90) deg. 128 x 128 px, 110 deg vertical FOV, TinyRenderer.
-Seeds: train 10_000.., held-out 20_000..; the benchmark evaluates seeds 0..99 (disjoint).
+Seeds: train 10_000.., held-out 20_000.., both training worlds (`trade_gym.bench.splits`); the benchmark
+evaluates development worlds 0..99 (disjoint).
 Output: one .npz per split: rgb (N, H, W, 3) uint8, depth_m (N, H, W) float16 (far_m where nothing was hit),
 scene (N,) str, seed (N,) int, pitch_deg, altitude_agl_m (N,) float32, far_m and render_s scalars.
 
@@ -29,12 +30,13 @@ import pybullet as p
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from trade.geometry import rotation_z  # noqa: E402
 from trade.single_image_depth import valid_depth_mask  # noqa: E402
+from trade_gym.bench.splits import TRAINING, require_training_worlds  # noqa: E402
 from trade_gym.sim.camera import Camera, CameraConfig  # noqa: E402
 from trade_gym.sim.world import World, build_world  # noqa: E402
 
 SCENE_CYCLE = ("desert", "city", "mountain")
-TRAIN_SEED_BASE = 10_000
-HELDOUT_SEED_BASE = 20_000
+TRAIN_SEED_BASE = TRAINING.first  # both data splits lie in the training split of worlds
+HELDOUT_SEED_BASE = TRAINING.first + 10_000
 GRAVITY_MPS2 = 9.81
 DEFAULT_OUT_DIR = Path(__file__).resolve().parents[1] / "build" / "depth_dataset"
 
@@ -113,6 +115,7 @@ def render_world_views(cid: int, scene: str, seed: int, count: int, cfg: ViewCon
 
 def render_split(seed_base: int, worlds: int, views_per_world: int, cfg: ViewConfig) -> dict[str, np.ndarray]:
     """Arrays of one split (see the module docstring), rendered in one DIRECT client that is closed after."""
+    require_training_worlds(range(seed_base, seed_base + worlds), "depth dataset")
     cid = p.connect(p.DIRECT)
     try:
         rows: dict[str, list] = {"rgb": [], "depth_m": [], "scene": [], "seed": [], "pitch_deg": [],

@@ -33,9 +33,9 @@ class EnvConfig:
     episode_duration_s: float = 30.0  # truncation horizon [s]
     lost_timeout_s: float = 3.0  # terminate when the target is out of view this long [s]
     visible_fraction_threshold: float = 0.25  # target counts as visible above this fraction
-    # Perception ablation switches (perception="trade").
+    # Perception ablation switches (perception="trade" or "dcf"); the defaults are full TRADE.
     temporal_fusion: bool = True
-    ground_mask: bool = False
+    ground_mask: bool = True  # single-image depth runs every third frame for it
     single_image_depth: bool = False  # depth-only mode (paper Table 2); needs ground_mask=False
     depth_only_ransac: bool = True  # depth-only alignment by RANSAC; False: plain least squares
     trajectory_guidance: bool = True

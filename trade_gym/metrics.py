@@ -30,6 +30,7 @@ METRIC_NAMES = (
     "steps", "visible_fraction", "tracked_fraction", "success_auc", "precision_20px",
     "longest_lost_streak_s", "decoy_switches", "ground_depth_rmse_m", "ground_depth_frames",
     "target_depth_rmse_m", "target_depth_frames", "mean_horizontal_error_m", "crashed",
+    "ground_depth_bias_m", "initial_iou",
 )
 
 
@@ -129,6 +130,19 @@ def depth_rmse(infos: Sequence[Info], kind: str) -> float:
     return float(np.sqrt(np.mean(err ** 2))) if len(err) else float("nan")
 
 
+def depth_bias(infos: Sequence[Info], kind: str) -> float:
+    """Mean signed error [m] of `<kind>_depth_est` over frames where both depths exist: negative when the
+    estimate is nearer the camera than the truth (e.g. a ground plane fitted to roofs)."""
+    err = depth_errors_m(infos, kind)
+    err = err[np.isfinite(err)]
+    return float(np.mean(err)) if len(err) else float("nan")
+
+
+def initial_iou(infos: Sequence[Info]) -> float:
+    """IoU of the first step's estimate with the true box (a wrong initial box shows here)."""
+    return float(infos[0]["iou"]) if infos else float("nan")
+
+
 def depth_frames(infos: Sequence[Info], kind: str) -> int:
     """Frames where both the estimated and the true `kind` depth exist."""
     return int(np.sum(np.isfinite(depth_errors_m(infos, kind))))
@@ -166,4 +180,6 @@ def episode_metrics(infos: Sequence[Info], frame_dt_s: float = FRAME_DT_S) -> di
         "target_depth_frames": depth_frames(infos, "target"),
         "mean_horizontal_error_m": mean_horizontal_distance(infos),
         "crashed": crashed(infos),
+        "ground_depth_bias_m": depth_bias(infos, "ground"),
+        "initial_iou": initial_iou(infos),
     }

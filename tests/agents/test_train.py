@@ -9,6 +9,7 @@ import pytest
 from agents.learned import LearnedFollower
 from agents.train import TrainConfig, train
 from agents.training_env import SceneRandomizedEnv, ZeroYawAction
+from trade_gym.bench.splits import DEVELOPMENT, EVALUATION, TRAINING
 from trade_gym.reward import RewardConfig
 from trade_gym.rollout import run_episode
 from trade_gym.sim.scenes import get_scene
@@ -88,6 +89,13 @@ def test_scene_randomized_env_same_seed_draws_same_scenes_and_distinct_worlds():
     first = scene_draws(7)
     assert first == scene_draws(7) and first != scene_draws(8)
     assert {scene for scene, _ in first} == {"city", "mountain"} and len({s for _, s in first}) == len(first)
+    assert all(world in TRAINING for _, world in first + scene_draws(8))
+
+
+@pytest.mark.parametrize("world_seed", [EVALUATION.first, EVALUATION.last, DEVELOPMENT.first])
+def test_train_config_world_seed_outside_training_split_raises(world_seed):
+    with pytest.raises(ValueError, match=f"world seed {world_seed}"):
+        TrainConfig(env_kwargs=(("perception", "oracle"), ("world_seed", world_seed)))
 
 
 @pytest.mark.parametrize("keep_shape_terms", [True, False])

@@ -5,16 +5,21 @@ run the chosen suite or grid, and write results.json, results.md, plots and opti
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from trade_gym.bench import plots, reference, report
 from trade_gym.bench.policies import POLICY_NAMES, available_policies, learned_unavailable_reason
-from trade_gym.bench.results import build_document, collect_meta, load_schema, to_json_safe, write_json
+from trade_gym.bench.results import (SERIES_FILE, build_document, collect_meta, load_schema, to_json_safe,
+                                     write_json, write_series)
 from trade_gym.bench.runner import RunResult, run_all
-from trade_gym.bench.suites import BOOL_SWITCHES, SUITE_JOBS, SUITES, RunSpec, Selection, expand_suite
+from trade_gym.bench.splits import EVALUATION
+from trade_gym.bench.suites import (BOOL_SWITCHES, EVALUATION_SUITES, SUITE_JOBS, SUITES, RunSpec, Selection,
+                                    expand_suite)
 from trade_gym.bench.summary import summarise
 from trade_gym.config import PERCEPTION_MODES, POSE_SOURCES, SCENE_NAMES, EnvConfig
 
@@ -40,7 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
                 "With --suite, --scenes/--policies/--perceptions/--pose-sources/--ablation/--tables filter the "
                 "suite and --seeds/--steps/--camera-size override it; without, they define one grid.")
     p.add_argument("--suite", choices=tuple(SUITES), help="quick (make demo, ~1-3 min), paper (the paper's "
-                   "tables, ~1 h on 2 cores), full (paper tables at full length plus all followers, hours)")
+                   "tables on its development worlds, ~1 h on 2 cores), unseen (the paper's protocol on the 20 "
+                   "evaluation worlds per scene, ~1.5 h), full (paper tables at full length plus all followers, hours)")
     p.add_argument("--tables", nargs="+", metavar="GROUP", help="groups of the suite to run (see --list)")
     p.add_argument("--scenes", nargs="+", choices=SCENE_NAMES)
     p.add_argument("--policies", nargs="+", metavar="POLICY", help=f"any of {', '.join(POLICY_NAMES)}")
@@ -121,6 +127,38 @@ def validate_runs(specs: Sequence[RunSpec]) -> None:
             raise UsageError(f"run {spec.config_id}: the env rejects its configuration: {exc}") from None
 
 
+def check_worlds(suite: str | None, specs: Sequence[RunSpec]) -> None:
+    """Evaluation worlds are flown by the evaluation suites only, and those fly nothing else."""
+    for spec in specs:
+        on_evaluation = spec.world_seed in EVALUATION
+        if suite in EVALUATION_SUITES and not on_evaluation:
+            raise UsageError(f"suite {suite} flies evaluation worlds {EVALUATION.first}..{EVALUATION.last} only; "
+                             f"run {spec.run_id} is on world {spec.world_seed}")
+        if suite not in EVALUATION_SUITES and on_evaluation:
+            raise UsageError(f"run {spec.run_id} is on world {spec.world_seed}, an evaluation world "
+                             f"({EVALUATION.first}..{EVALUATION.last}); only --suite "
+                             f"{' or '.join(EVALUATION_SUITES)} flies those")
+
+
+def _identity(spec: RunSpec) -> tuple[Any, ...]:
+    """What a run's episode depends on: two specs with the same identity fly the same episode."""
+    return spec.policy, spec.seed, spec.steps, EnvConfig(**spec.env_kwargs())
+
+
+def run_once_each(specs: Sequence[RunSpec], jobs: int,
+                  on_done: Callable[[int, int, RunResult], None] | None = None) -> list[RunResult]:
+    """Results of `specs` in their order, flying each distinct episode once (groups of a suite may share
+    runs, e.g. full TRADE in both the unseen table and its Table 1 rows)."""
+    index: dict[tuple[Any, ...], int] = {}
+    distinct: list[RunSpec] = []
+    for spec in specs:
+        if (key := _identity(spec)) not in index:
+            index[key] = len(distinct)
+            distinct.append(spec)
+    flown = run_all(distinct, jobs, on_done)
+    return [dataclasses.replace(flown[index[_identity(s)]], spec=s) for s in specs]
+
+
 def _check_paths(args: argparse.Namespace, selection: Selection) -> None:
     if args.out is None:
         raise UsageError("--out DIR is required")
@@ -175,6 +213,7 @@ def write_outputs(args: argparse.Namespace, results: list[RunResult], argv: Sequ
     (out / "results.md").write_text(markdown)
     print(report.headline(markdown))  # the score tables on stdout; progress and errors go to stderr
     write_json(out / "results.json", document)
+    write_series(out / SERIES_FILE, results)
     _validate_schema(to_json_safe(document))
     return document
 
@@ -194,6 +233,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         selection = _selection(args)
         specs = expand_suite(args.suite, selection, available_policies())
         validate_runs(specs)
+        check_worlds(args.suite, specs)
         if args.list:
             print("\n".join(s.run_id + f" ({s.steps} steps, {s.camera_size} px)" for s in specs))
             return 0
@@ -204,7 +244,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     jobs = args.jobs or SUITE_JOBS.get(args.suite or "", DEFAULT_CUSTOM_JOBS)
     args.out.mkdir(exist_ok=True)
     start = time.perf_counter()
-    results = run_all(specs, jobs, _progress(start))
+    results = run_once_each(specs, jobs, _progress(start))
     wall_s = time.perf_counter() - start
     write_outputs(args, results, argv, jobs, wall_s)
     status = 0

@@ -11,11 +11,13 @@ import os
 import platform
 import subprocess
 from collections.abc import Sequence
-from dataclasses import asdict
+from dataclasses import asdict, fields
 from datetime import datetime, timezone
 from importlib import resources
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from trade_gym.bench.runner import RunResult
 from trade_gym.bench.summary import spec_record
@@ -26,6 +28,7 @@ PACKAGES = ("numpy", "pybullet", "gymnasium", "opencv-python-headless", "onnxrun
             "filterpy", "matplotlib", "trade-gym")
 RENDERER = "TinyRenderer"  # pybullet DIRECT mode's software renderer (the env's default)
 GIT_TIMEOUT_S = 5.0
+SERIES_FILE = "series.npz"  # every run's per-frame series, keyed "<run_id>/<field>" (see RunSeries)
 
 
 def git_commit(cwd: Path | None = None) -> str:
@@ -104,6 +107,13 @@ def build_document(results: Sequence[RunResult], summary: list[dict[str, Any]], 
                    "mean_steps_per_s": steps / loop_s if loop_s > 0 else math.nan},
         "files": {"plots": list(plots), "video": video},
     }
+
+
+def write_series(path: Path, results: Sequence[RunResult]) -> None:
+    """The per-frame series of every finished run (float32, compressed), for analysis without a re-run."""
+    arrays = {f"{r.spec.run_id}/{f.name}": getattr(r.series, f.name).astype(np.float32)
+              for r in results if r.series is not None for f in fields(r.series)}
+    np.savez_compressed(path, **arrays)
 
 
 def to_json_safe(value: Any) -> Any:

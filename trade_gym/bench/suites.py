@@ -10,11 +10,12 @@ import itertools
 from dataclasses import dataclass, fields
 from typing import Any
 
+from trade_gym.bench.splits import EVALUATION
 from trade_gym.config import CAMERA_RATE_HZ, SCENE_NAMES, EnvConfig
 
 Kwargs = tuple[tuple[str, Any], ...]  # sorted (name, value) pairs: hashable env keyword arguments
 # Which table a group renders in results.md (and how its runs are compared).
-GROUP_KINDS = ("follow", "tracking", "table1", "table2", "custom")
+GROUP_KINDS = ("follow", "tracking", "table1", "table2", "unseen", "custom")
 BOOL_SWITCHES = tuple(f.name for f in fields(EnvConfig) if f.type == "bool")
 # The paper's protocol: one sequence per scene (a fixed world), each run of it with its first tracked
 # frame shifted within 10 frames and its initial box perturbed within 5 px (and its own sensor noise);
@@ -23,6 +24,10 @@ PAPER_SEQUENCE_WORLD_SEED = 0
 PAPER_PROTOCOL: Kwargs = (("init_box_perturb_px", 5.0), ("init_frame_shift_max", 10), ("snap_init_box", True),
                           ("world_seed", PAPER_SEQUENCE_WORLD_SEED))
 DEPTH_RUNS, TRACKING_RUNS = (0, 4), (0, 9)  # seeds (inclusive): 5 runs for depth, 10 for tracking
+# The same protocol on worlds nobody tuned on: one run per evaluation world, whose reset seed draws it.
+UNSEEN_PROTOCOL: Kwargs = tuple(kv for kv in PAPER_PROTOCOL if kv[0] != "world_seed")
+UNSEEN_WORLDS = (EVALUATION.first, EVALUATION.last)
+UNSEEN_ABLATION_WORLDS = (EVALUATION.first, EVALUATION.first + 4)  # Table 1's ablation rows on the first 5
 
 
 @dataclass(frozen=True)
@@ -53,6 +58,12 @@ class RunSpec:
     @property
     def run_id(self) -> str:
         return f"{self.config_id}/seed{self.seed}"
+
+    @property
+    def world_seed(self) -> int:
+        """The seed of the run's world: the protocol's fixed world, or else the reset seed."""
+        fixed = dict(self.extra).get("world_seed", dict(self.switches).get("world_seed"))
+        return self.seed if fixed is None else int(fixed)
 
     def env_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of `TradeFollowEnv` for this run; truncation at exactly `steps` frames."""
@@ -149,13 +160,30 @@ def _paper_groups(steps: int, camera_size: int) -> tuple[GroupSpec, ...]:
         GroupSpec("table1", "table1", "Table 1: ground-depth RMSE [m], temporal fusion x ground mask, gt (vio) pose",
                   ALL_SCENES, ("scripted",), ("trade",), ("gt", "vio"), DEPTH_RUNS, steps, camera_size,
                   (("temporal_fusion", ON_OFF), ("ground_mask", ON_OFF)), PAPER_PROTOCOL, "ground"),
-        # Table 2 needs the depth-only single-image mode (`single_image_depth=True`, RANSAC on/off).
+        # Table 2 needs the depth-only single-image mode (`single_image_depth=True`, RANSAC on/off), which
+        # replaces the plane fit the ground mask selects points for, so the mask is off.
         GroupSpec("table2", "table2", "Table 2: target-depth RMSE [m] from single-image depth, RANSAC off/on",
                   ALL_SCENES, ("scripted",), ("trade",), ("gt",), DEPTH_RUNS, steps, camera_size,
-                  (("depth_only_ransac", ON_OFF),), PAPER_PROTOCOL + (("single_image_depth", True),), "target"),
+                  (("depth_only_ransac", ON_OFF),),
+                  PAPER_PROTOCOL + (("single_image_depth", True), ("ground_mask", False)), "target"),
         GroupSpec("tracking", "tracking", "Tracking: TRADE against DCF (no trajectory guidance), vio pose",
                   ALL_SCENES, ("scripted",), ("trade", "dcf"), ("vio",), TRACKING_RUNS, steps, camera_size,
                   (), PAPER_PROTOCOL, "ground"),
+    )
+
+
+def _unseen_groups(steps: int, camera_size: int) -> tuple[GroupSpec, ...]:
+    title = ("Unseen worlds: full TRADE (gt and vio pose) and the DCF baseline (vio), scripted follower, "
+             "one run per evaluation world")
+    return (
+        GroupSpec("unseen", "unseen", title, ALL_SCENES, ("scripted",), ("trade",), ("gt", "vio"), UNSEEN_WORLDS,
+                  steps, camera_size, (), UNSEEN_PROTOCOL),
+        GroupSpec("unseen", "unseen", title, ALL_SCENES, ("scripted",), ("dcf",), ("vio",), UNSEEN_WORLDS,
+                  steps, camera_size, (), UNSEEN_PROTOCOL),
+        GroupSpec("unseen_table1", "table1", "Table 1 on the first 5 evaluation worlds: ground-depth RMSE [m], "
+                  "temporal fusion x ground mask, gt (vio) pose", ALL_SCENES, ("scripted",), ("trade",),
+                  ("gt", "vio"), UNSEEN_ABLATION_WORLDS, steps, camera_size,
+                  (("temporal_fusion", ON_OFF), ("ground_mask", ON_OFF)), UNSEEN_PROTOCOL, "ground"),
     )
 
 
@@ -165,13 +193,16 @@ PAPER_CAMERA_PX = 256
 SUITES: dict[str, tuple[GroupSpec, ...]] = {
     "quick": QUICK,
     "paper": _paper_groups(PAPER_STEPS, PAPER_CAMERA_PX),
+    "unseen": _unseen_groups(PAPER_STEPS, PAPER_CAMERA_PX),
     "full": _paper_groups(FULL_STEPS, PAPER_CAMERA_PX) + (
         GroupSpec("policies", "follow", "Followers on oracle and TRADE perception",
                   ALL_SCENES, ("scripted", "learned", "hover", "random"), ("oracle", "trade"), ("gt",),
                   TRACKING_RUNS, FULL_STEPS, PAPER_CAMERA_PX),
     ),
 }
-SUITE_JOBS = {"quick": 2, "paper": 2, "full": 2}  # default --jobs per suite
+SUITE_JOBS = {"quick": 2, "paper": 2, "unseen": 2, "full": 2}  # default --jobs per suite
+# Suites that fly evaluation worlds; no other suite or grid may (`trade_gym.bench.splits`).
+EVALUATION_SUITES = ("unseen",)
 
 # A run without --suite: one grid of the chosen axes, these defaults where nothing was chosen.
 CUSTOM_DEFAULTS = GroupSpec("custom", "custom", "Custom grid", ALL_SCENES, ("scripted",), ("oracle",), ("gt",),

@@ -10,19 +10,26 @@ from typing import Any
 
 import numpy as np
 
+from trade_gym.bench.failures import failure_cause
 from trade_gym.bench.runner import RunResult
 from trade_gym.bench.suites import RunSpec
 from trade_gym.metrics import DEPTH_KINDS, METRIC_NAMES
 
 
+UPPER_PERCENTILE = 90.0  # the "p90" of metric_stats
+
+
 def metric_stats(values: Sequence[float]) -> dict[str, float | int]:
-    """mean, sample std (NaN below two values), min, max over the finite values, and their count n."""
+    """mean, sample std (NaN below two values), min, max, median and 90th percentile (linear
+    interpolation) over the finite values, and their count n."""
     v = np.asarray(values, dtype=np.float64)
     v = v[np.isfinite(v)]
     if not len(v):
-        return {"mean": math.nan, "std": math.nan, "min": math.nan, "max": math.nan, "n": 0}
+        return {"mean": math.nan, "std": math.nan, "min": math.nan, "max": math.nan, "median": math.nan,
+                "p90": math.nan, "n": 0}
     std = float(np.std(v, ddof=1)) if len(v) > 1 else math.nan
-    return {"mean": float(np.mean(v)), "std": std, "min": float(np.min(v)), "max": float(np.max(v)), "n": len(v)}
+    return {"mean": float(np.mean(v)), "std": std, "min": float(np.min(v)), "max": float(np.max(v)),
+            "median": float(np.median(v)), "p90": float(np.percentile(v, UPPER_PERCENTILE)), "n": len(v)}
 
 
 def pooled_rmse(rmses: Sequence[float], frames: Sequence[int]) -> float:
@@ -54,6 +61,9 @@ def summarise(results: Sequence[RunResult]) -> list[dict[str, Any]]:
                 [r.metrics[f"{kind}_depth_rmse_m"] for r in ok], [r.metrics[f"{kind}_depth_frames"] for r in ok])
         record["decoy_switches_total"] = int(sum(r.metrics["decoy_switches"] for r in ok))
         record["crashes"] = int(sum(bool(r.metrics["crashed"]) for r in ok))
+        scores_ground = runs[0].spec.perception != "oracle" and runs[0].spec.depth_kind == "ground"
+        causes = [(r.spec.seed, failure_cause(r.metrics, scores_ground)) for r in ok]
+        record["failed_runs"] = [{"seed": seed, "cause": cause} for seed, cause in causes if cause is not None]
         summary.append(record)
     return summary
 
