@@ -164,7 +164,7 @@ def machine_meta() -> dict:
             "cpu": platform.processor() or platform.machine(), "cores": os.cpu_count()}
 
 
-def main() -> None:
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", nargs="+", default=["desert", "city", "mountain"])
     parser.add_argument("--seeds", type=int, nargs="+", default=list(TRAINING.seeds(3)),
@@ -172,7 +172,12 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--camera-size", type=int, default=256)
     parser.add_argument("--json", type=Path, default=None)
-    args = parser.parse_args()
+    return parser
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = build_parser()
+    args = parser.parse_args(argv)
     try:
         require_training_worlds(args.seeds, "--seeds")
     except ValueError as exc:

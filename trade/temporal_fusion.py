@@ -110,11 +110,12 @@ class TemporalPlaneFusion:
         self._count = min(self._count + points.shape[0], size)
 
     def _bootstrap_inliers(self, points: FloatArray, query_xy: FloatArray | None) -> FloatArray:
-        """Without a past plane the frame gates itself: keep its own multi-RANSAC inliers."""
+        """Without a past plane the frame gates itself: keep its own multi-RANSAC inliers, none when its
+        points give no admissible ground plane (e.g. one steeper than the RANSAC's tilt limit)."""
         if points.shape[0] < self.config.min_points:
             return points
         fit = multi_ransac(points, self.config.ransac, self._rng, query_xy)
-        return points if fit is None else points[fit.inlier_mask]
+        return points[:0] if fit is None else points[fit.inlier_mask]
 
     def update(self, points_world: FloatArray, query_xy: FloatArray | None = None) -> FusionResult:
         """points_world: (N, 3) world [m] ground inliers of this frame; query_xy: (2,) world [m]

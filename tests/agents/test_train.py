@@ -18,11 +18,12 @@ from trade_gym.sim.scenes import get_scene
 EASY_ENV = (("perception", "oracle"), ("oracle_first_fix_delay_s", 0.0))
 EASY_SCENE = "city"
 EPISODE_S = 4.0
-TINY = TrainConfig(total_steps=2048, n_envs=1, n_steps_per_env=512, batch_size=128, n_epochs=10,
+# 6144 steps: at 2048 the margin over random swung between 16 and 43 with the training worlds drawn.
+TINY = TrainConfig(total_steps=6144, n_envs=1, n_steps_per_env=512, batch_size=128, n_epochs=10,
                    learning_rate=3e-4, use_sde=False, log_std_init=-1.5, keep_env_shape_terms=True,
                    scenes=(EASY_SCENE,), episode_duration_s=EPISODE_S, env_kwargs=EASY_ENV, progress_bar=False,
                    seed=0, warm_start=None)
-EVAL_SEEDS = (1000, 1001, 1002)
+EVAL_SEEDS = DEVELOPMENT.seeds(8)  # development worlds, as every test
 MIN_RETURN_MARGIN = 20.0  # mean per episode of 120 steps (random flails: altitude, centering, effort terms)
 
 

@@ -215,3 +215,20 @@ def test_multi_ransac_paper_rule_ground_majority_with_roof_30m_up_and_30pct_outl
     assert angle_deg(res.selected, ground) < 1.0
     assert abs(res.selected.height_at(QUERY_XY)) < 0.1
     assert res.inlier_mask[:120].mean() > 0.95 and res.inlier_mask[120:210].mean() < 0.05
+
+
+@pytest.mark.parametrize("tilt_deg", [40.0, 60.0])
+def test_multi_ransac_only_planes_steeper_than_the_tilt_limit_gives_no_ground(tilt_deg: float) -> None:
+    """A roof edge and the ground below it fit a steep plane; no vehicle drives on one."""
+    pts = plane_points(np.random.default_rng(21), 60, tilted(tilt_deg), -10.0, 10.0)
+    cfg = MultiRansacConfig()
+    assert tilt_deg > cfg.max_ground_tilt_deg
+    assert multi_ransac(pts, cfg, np.random.default_rng(22), QUERY_XY) is None
+    steep_allowed = multi_ransac(pts, MultiRansacConfig(max_ground_tilt_deg=90.0), np.random.default_rng(22),
+                                 QUERY_XY)
+    assert steep_allowed is not None and angle_deg(steep_allowed.selected, tilted(tilt_deg)) < 1.0
+
+
+def test_multi_ransac_tilt_limit_rejects_a_bad_value() -> None:
+    with pytest.raises(ValueError, match="max_ground_tilt_deg"):
+        MultiRansacConfig(max_ground_tilt_deg=120.0)

@@ -151,3 +151,15 @@ def test_fusion_max_age_keeps_old_sparse_ground_out_of_the_fit(max_age_frames: i
         res = fusion.update(_crest_frame(rng, centre))
     error_m = abs(res.plane.height_at(np.array([0.0, 0.0])))
     assert (error_m < 0.1) == fits_level_ground, error_m
+
+
+def test_fusion_bootstrap_from_a_too_steep_frame_keeps_nothing_then_starts_on_the_ground() -> None:
+    """Before any plane, a frame whose points only fit a plane steeper than the ground tilt limit (a roof
+    edge and the street) is not buffered; the first frame of real ground starts the fusion."""
+    rng = np.random.default_rng(3)
+    fusion = TemporalPlaneFusion(TemporalFusionConfig(), np.random.default_rng(4))
+    steep = fusion.update(ground_frame(rng, slope=1.5))  # 56 deg
+    assert steep.plane is None and steep.n_accepted == 0 and steep.n_buffered == 0
+    ground = fusion.update(ground_frame(rng))
+    assert ground.plane is not None and ground.n_accepted >= 0.95 * N_PER_FRAME
+    assert abs(ground.plane.height_at([0.0, 0.0])) < 0.05

@@ -12,7 +12,7 @@ import jsonschema
 import numpy as np
 import pytest
 
-from trade_gym.bench import cli, reference, runner
+from trade_gym.bench import cli, failures, plots, reference, runner
 from trade_gym.bench.plots import nanmean_ragged
 from trade_gym.bench.policies import HoverPolicy, available_policies, learned_unavailable_reason, make_policy
 from trade_gym.bench.report import render_markdown, table1_pivot
@@ -210,6 +210,45 @@ def test_cli_tiny_oracle_run_writes_schema_valid_outputs_with_timing_apart(tmp_p
     for name in doc["files"]["plots"]:
         assert (tmp_path / "a" / name).stat().st_size > 0
     assert "4 runs in" in capsys.readouterr().out
+    # --report renders the same results.md and summary again from results.json (and series.npz beside it)
+    assert cli.main(["--report", str(tmp_path / "a"), "--out", str(tmp_path / "b")]) == 0
+    again = json.loads((tmp_path / "b" / "results.json").read_text())
+    assert (tmp_path / "b" / "results.md").read_text() == md
+    assert deterministic_part(again) == deterministic_part(doc) and again["meta"] == doc["meta"]
+    assert (tmp_path / "b" / "custom_iou.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("where", ["missing", "same folder"])
+def test_cli_report_of_a_missing_or_same_folder_exits_2(where, tmp_path, capsys):
+    source = tmp_path / "run"
+    source.mkdir()
+    if where == "same folder":
+        (source / "results.json").write_text("{}")
+    out = source if where == "same folder" else tmp_path / "out"
+    assert cli.main(["--report", str(source), "--out", str(out)]) == 2
+    assert capsys.readouterr().err.startswith("trade-bench: error: --")
+
+
+def _unseen_result(scene: str, seed: int, rmse: float, bias: float, tracked: float) -> runner.RunResult:
+    metrics = dict.fromkeys(METRIC_NAMES, 0.0) | {
+        "steps": 450, "tracked_fraction": tracked, "initial_iou": 0.8, "decoy_switches": 0,
+        "ground_depth_rmse_m": rmse, "ground_depth_frames": 400, "ground_depth_bias_m": bias, "crashed": False}
+    spec = RunSpec("unseen", "unseen", scene, "scripted", "trade", "gt", seed, 450, 256)
+    return runner.RunResult(spec, metrics, runner.RunTiming(1.0, 0.1, 0.9, 500.0), None)
+
+
+def test_unseen_report_gives_pooled_rmse_frames_spread_and_each_failed_world_with_its_cause(tmp_path):
+    results = [_unseen_result("city", 7, 0.3, 0.1, 0.95), _unseen_result("city", 8, 0.5, -0.2, 0.9),
+               _unseen_result("city", 9, 14.0, -13.0, 0.92)]
+    summary = summarise(results)
+    assert summary[0]["pooled_ground_depth_frames"] == 1200
+    assert summary[0]["failed_runs"] == [{"seed": 9, "cause": failures.PLANE_ABOVE}]
+    md = render_markdown(summary, {"commit": "c", "date_utc": "d", "cpu": "x", "cores": 1, "renderer": "r",
+                                   "runs": 3, "wall_s": 1.0, "jobs": 1}, {}, [], [])
+    pooled = math.sqrt((0.3 ** 2 + 0.5 ** 2 + 14.0 ** 2) / 3)
+    assert f"| city | scripted trade gt | 3 | {pooled:.2f} | 1200 | 0.5 / 11.3 / 14 |" in md
+    assert "| 1 of 3 |" in md and f"- city, scripted trade gt, world 9: {failures.PLANE_ABOVE}" in md
+    assert plots.plot_strip(results, "t", tmp_path / "strip.png").stat().st_size > 0
 
 
 def test_headline_keeps_tables_drops_details_and_plots():

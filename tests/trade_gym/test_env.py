@@ -180,3 +180,21 @@ def test_action_beyond_bounds_acts_like_the_bound():
     finally:
         for e in envs:
             e.close()
+
+
+def test_default_env_is_full_trade_with_ground_mask_and_temporal_fusion():
+    env = gym.make("TradeFollow-v0")
+    try:
+        perception = env.unwrapped.perception
+        stack = perception.pipeline_config
+        assert env.unwrapped.config.perception == "trade"
+        assert stack.ground_mask and stack.temporal_fusion and stack.trajectory_guidance
+        assert not stack.single_image_depth and perception.depth_model is not None
+    finally:
+        env.close()
+
+
+def test_depth_only_mode_needs_the_ground_mask_turned_off_explicitly():
+    with pytest.raises(ValueError, match="single_image_depth.*ground_mask"):
+        gym.make("TradeFollow-v0", single_image_depth=True)
+    gym.make("TradeFollow-v0", single_image_depth=True, ground_mask=False, camera_size=32).close()

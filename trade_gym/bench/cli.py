@@ -14,8 +14,8 @@ from typing import Any
 
 from trade_gym.bench import plots, reference, report
 from trade_gym.bench.policies import POLICY_NAMES, available_policies, learned_unavailable_reason
-from trade_gym.bench.results import (SERIES_FILE, build_document, collect_meta, load_schema, to_json_safe,
-                                     write_json, write_series)
+from trade_gym.bench.results import (SERIES_FILE, build_document, collect_meta, load_results, load_schema,
+                                     to_json_safe, write_json, write_series)
 from trade_gym.bench.runner import RunResult, run_all
 from trade_gym.bench.splits import EVALUATION
 from trade_gym.bench.suites import (BOOL_SWITCHES, EVALUATION_SUITES, SUITE_JOBS, SUITES, RunSpec, Selection,
@@ -62,6 +62,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--video", action="store_true", help="also write a video of the first run (flown again "
                    "with rendering on; mp4, or GIF without an mp4 encoder)")
     p.add_argument("--list", action="store_true", help="print the runs and exit without running them")
+    p.add_argument("--report", type=Path, metavar="RESULTS_JSON", help="run nothing: render results.md and the "
+                   "plots of an earlier run's results.json (and its series.npz, when beside it) into --out")
     p.add_argument("--write-reference", nargs="?", const=reference.reference_path(), type=Path, metavar="PATH",
                    help="quick suite only: write its metrics as the regression reference")
     p.add_argument("--check-reference", nargs="?", const=reference.reference_path(), type=Path, metavar="PATH",
@@ -189,8 +191,7 @@ def _progress(start: float) -> Callable[[int, int, RunResult], None]:
     return show
 
 
-def write_outputs(args: argparse.Namespace, results: list[RunResult], argv: Sequence[str], jobs: int,
-                  wall_s: float) -> dict:
+def write_outputs(args: argparse.Namespace, results: list[RunResult], meta: dict[str, Any]) -> dict:
     """results.json, results.md, the plots and the optional video; returns the JSON document."""
     out: Path = args.out
     summary = summarise(results)
@@ -204,16 +205,16 @@ def write_outputs(args: argparse.Namespace, results: list[RunResult], argv: Sequ
         from trade_gym.bench.video import record_video
 
         video = record_video(first_ok.spec, out / "video").name
-    meta = collect_meta(args.suite, argv, jobs, len(results), wall_s)
     names = [p.name for p in written]
     document = build_document(results, summary, meta, names, video)
-    titles = {g.name: g.title for g in SUITES.get(args.suite or "", ())}
+    titles = {g.name: g.title for g in SUITES.get(meta["suite"] or "", ())}
     failures = [f"{r.spec.run_id}: {r.error}" for r in results if r.error]
     markdown = report.render_markdown(summary, meta, titles, failures, names)
     (out / "results.md").write_text(markdown)
     print(report.headline(markdown))  # the score tables on stdout; progress and errors go to stderr
     write_json(out / "results.json", document)
-    write_series(out / SERIES_FILE, results)
+    if any(r.series is not None for r in results):
+        write_series(out / SERIES_FILE, results)
     _validate_schema(to_json_safe(document))
     return document
 
@@ -226,10 +227,33 @@ def _validate_schema(document: dict) -> None:
     jsonschema.validate(document, load_schema())
 
 
+def render_report(args: argparse.Namespace) -> int:
+    """--report: the outputs of an earlier run rendered again (with its own meta: commit, date, machine)."""
+    source = args.report / "results.json" if args.report.is_dir() else args.report
+    if not source.is_file():
+        raise UsageError(f"--report {args.report}: no results.json there")
+    if args.out is None:
+        raise UsageError("--out DIR is required")
+    if args.out.resolve() == source.parent.resolve():
+        raise UsageError(f"--out {args.out} is the folder of --report; render into another one")
+    if not args.out.parent.is_dir():
+        raise UsageError(f"--out {args.out}: parent folder {args.out.parent} does not exist")
+    try:
+        results, meta = load_results(source)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise UsageError(f"--report {source}: not a trade-bench results.json ({type(exc).__name__}: {exc})") from None
+    args.out.mkdir(exist_ok=True)
+    write_outputs(args, results, meta)
+    print(f"{len(results)} runs of {source} -> {args.out / 'results.md'}")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         args = build_parser().parse_args(argv)
+        if args.report is not None:
+            return render_report(args)
         selection = _selection(args)
         specs = expand_suite(args.suite, selection, available_policies())
         validate_runs(specs)
@@ -246,7 +270,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     start = time.perf_counter()
     results = run_once_each(specs, jobs, _progress(start))
     wall_s = time.perf_counter() - start
-    write_outputs(args, results, argv, jobs, wall_s)
+    write_outputs(args, results, collect_meta(args.suite, argv, jobs, len(results), wall_s))
     status = 0
     if failed := [r for r in results if r.error]:
         print(f"{PROG}: {len(failed)} of {len(results)} runs failed (see results.md)", file=sys.stderr)

@@ -14,6 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402  (after choosing the headless back
 import numpy as np  # noqa: E402
 import numpy.typing as npt  # noqa: E402
 
+from trade_gym.bench.failures import FAIL_GROUND_RMSE_M, FAIL_TRACKED_FRACTION  # noqa: E402
 from trade_gym.bench.runner import RunResult  # noqa: E402
 from trade_gym.bench.summary import config_label, spec_record  # noqa: E402
 from trade_gym.config import CAMERA_RATE_HZ  # noqa: E402
@@ -102,10 +103,46 @@ def plot_paths(results: Sequence[RunResult], title: str, path: Path) -> Path | N
     return _save(fig, path)
 
 
+STRIP_PANEL_IN = (4.2, 5.0)  # one metric per panel [inch]
+STRIP_JITTER = 0.12  # half-width of the horizontal spread of a category's dots [category widths]
+MIN_LOG_RMSE_M = 0.01  # floor of the log-scaled RMSE axis [m]
+# (metric, axis label, failure threshold, log scale) of the strip plot's panels
+STRIP_METRICS = (("ground_depth_rmse_m", "ground-depth RMSE per world [m]", FAIL_GROUND_RMSE_M, True),
+                 ("tracked_fraction", "tracked fraction per world", FAIL_TRACKED_FRACTION, False))
+
+
+def plot_strip(results: Sequence[RunResult], title: str, path: Path) -> Path | None:
+    """Per-run values (one dot per world) of each `STRIP_METRICS` entry for every scene x configuration,
+    with the failure threshold dashed."""
+    categories: dict[str, list[RunResult]] = {}
+    for r in results:
+        if r.error is None:
+            categories.setdefault(f"{r.spec.scene}\n{config_label(spec_record(r.spec))}", []).append(r)
+    if not categories:
+        return None
+    fig, axes = plt.subplots(1, len(STRIP_METRICS), figsize=(STRIP_PANEL_IN[0] * len(STRIP_METRICS),
+                                                             STRIP_PANEL_IN[1]), squeeze=False)
+    offsets = np.random.default_rng(0)  # a fixed jitter: the same results draw the same figure
+    for ax, (name, label, threshold, log) in zip(axes[0], STRIP_METRICS):
+        for k, runs in enumerate(categories.values()):
+            values = np.array([float(r.metrics[name]) for r in runs], dtype=np.float64)
+            values = np.maximum(values, MIN_LOG_RMSE_M) if log else values
+            x = k + offsets.uniform(-STRIP_JITTER, STRIP_JITTER, len(values))
+            ax.plot(x, values, "o", ms=4, alpha=0.7, color=f"C{k % 10}")
+        ax.axhline(threshold, color="k", ls="--", lw=0.8, label=f"failure threshold ({threshold:g})")
+        ax.set_xticks(range(len(categories)), list(categories), rotation=90, fontsize=LEGEND_FONT_SIZE)
+        ax.set(ylabel=label, yscale="log" if log else "linear", title=title)
+        ax.grid(alpha=0.3, axis="y")
+        ax.legend(fontsize=LEGEND_FONT_SIZE, loc="upper left", bbox_to_anchor=(0.0, -0.45))
+    return _save(fig, path)
+
+
 def plot_group(results: Sequence[RunResult], group: str, depth_kind: str, out: Path) -> list[Path]:
     """All figures of one group, written into `out`; returns the files written."""
     depth = f"{depth_kind}_depth_error_m"
-    written = [
+    strip = [plot_strip(results, f"{group}: one dot per world", out / f"{group}_per_world.png")] \
+        if results and results[0].spec.kind == "unseen" else []
+    written = strip + [
         plot_per_frame(results, "iou", "IoU (mean over runs)", f"{group} IoU per frame", out / f"{group}_iou.png"),
         plot_per_frame(results, depth, f"|{depth_kind} depth error| [m]", f"{group} {depth_kind} depth error",
                        out / f"{group}_{depth_kind}_depth_error.png"),

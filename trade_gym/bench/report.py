@@ -8,6 +8,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from trade_gym.bench.failures import FAIL_GROUND_RMSE_M, FAIL_TRACKED_FRACTION
 from trade_gym.bench.summary import config_label
 
 Record = dict[str, Any]
@@ -113,7 +114,29 @@ def follow_pivot(records: Sequence[Record]) -> list[str]:
     return table(["follower"] + [f"{s}: visible / error [m]" for s in scenes], rows)
 
 
-PIVOTS = {"table1": table1_pivot, "table2": table2_pivot, "tracking": tracking_pivot, "follow": follow_pivot}
+def unseen_pivot(records: Sequence[Record]) -> list[str]:
+    """Per scene and configuration: pooled ground-depth RMSE with its frame count, the per-world median,
+    90th percentile and worst RMSE, tracking, and how many worlds failed; then each failed world's cause."""
+    header = ["scene", "configuration", "worlds", "ground RMSE pooled [m]", "frames", "per-world median / p90 / "
+              "worst [m]", "tracked (mean, median)", "switches", "failed worlds"]
+    rows, failed = [], []
+    for r in records:
+        m, rmse = r["metrics"], r["metrics"]["ground_depth_rmse_m"]
+        rows.append([r["scene"], config_label(r), str(r["n_runs"] - r["n_failed"]),
+                     fmt(r["pooled_ground_depth_rmse_m"]), str(r["pooled_ground_depth_frames"]),
+                     " / ".join(fmt(rmse[k]) for k in ("median", "p90", "max")),
+                     f"{fmt(m['tracked_fraction']['mean'])}, {fmt(m['tracked_fraction']['median'])}",
+                     str(r["decoy_switches_total"]), f"{len(r['failed_runs'])} of {r['n_runs']}"])
+        failed += [f"- {r['scene']}, {config_label(r)}, world {f['seed']}: {f['cause']}" for f in r["failed_runs"]]
+    lines = table(header, rows)
+    lines += ["", f"A world fails when its ground-depth RMSE exceeds {FAIL_GROUND_RMSE_M:g} m (or it has no ground "
+              f"depth) or the target is tracked in fewer than {FAIL_TRACKED_FRACTION:g} of its visible frames; "
+              "the cause is classified from the run's metrics (`trade_gym.bench.failures`).", ""]
+    return lines + (["Failed worlds:", ""] + failed if failed else ["No world failed."])
+
+
+PIVOTS = {"table1": table1_pivot, "table2": table2_pivot, "tracking": tracking_pivot, "follow": follow_pivot,
+          "unseen": unseen_pivot}
 
 
 def render_markdown(summary: Sequence[Record], meta: Record, titles: dict[str, str], failures: Sequence[str],

@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from trade_gym.bench.runner import RunResult
+from trade_gym.bench.runner import RunResult, RunSeries, RunTiming
+from trade_gym.bench.suites import RunSpec
 from trade_gym.bench.summary import spec_record
 
 SCHEMA_VERSION = 1
@@ -114,6 +115,37 @@ def write_series(path: Path, results: Sequence[RunResult]) -> None:
     arrays = {f"{r.spec.run_id}/{f.name}": getattr(r.series, f.name).astype(np.float32)
               for r in results if r.series is not None for f in fields(r.series)}
     np.savez_compressed(path, **arrays)
+
+
+# env keyword arguments every run spec sets itself (the rest of `env_kwargs` is its switches and extras)
+SPEC_ENV_KEYS = ("scene", "perception", "pose_source", "camera_size", "episode_duration_s")
+
+
+def _spec_of(run: dict[str, Any]) -> RunSpec:
+    switches = tuple(run["switches"].items())
+    extra = tuple((k, v) for k, v in run["env_kwargs"].items() if k not in SPEC_ENV_KEYS and k not in run["switches"])
+    return RunSpec(run["group"], run["kind"], run["scene"], run["policy"], run["perception"], run["pose_source"],
+                   run["seed"], run["steps_requested"], run["camera_size"], switches, extra, run["depth_kind"])
+
+
+def _nan_for_none(metrics: dict[str, Any]) -> dict[str, Any]:
+    return {k: math.nan if v is None else v for k, v in metrics.items()}
+
+
+def load_results(path: Path) -> tuple[list[RunResult], dict[str, Any]]:
+    """The runs and meta of a results.json written by trade-bench (with their per-frame series when the
+    series.npz written beside it is there), to render its report again."""
+    document = json.loads(path.read_text())
+    series_path = path.with_name(SERIES_FILE)
+    arrays = np.load(series_path) if series_path.is_file() else None
+    results = []
+    for run in document["runs"]:
+        keys = [f"{run['run_id']}/{f.name}" for f in fields(RunSeries)]
+        series = (RunSeries(*(arrays[k].astype(np.float64) for k in keys))
+                  if arrays is not None and all(k in arrays for k in keys) else None)
+        timing = RunTiming(**{k: math.nan if v is None else v for k, v in run["timing"].items()})
+        results.append(RunResult(_spec_of(run), _nan_for_none(run["metrics"]), timing, series, run["error"]))
+    return results, document["meta"]
 
 
 def to_json_safe(value: Any) -> Any:

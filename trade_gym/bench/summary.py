@@ -59,6 +59,7 @@ def summarise(results: Sequence[RunResult]) -> list[dict[str, Any]]:
         for kind in DEPTH_KINDS:
             record[f"pooled_{kind}_depth_rmse_m"] = pooled_rmse(
                 [r.metrics[f"{kind}_depth_rmse_m"] for r in ok], [r.metrics[f"{kind}_depth_frames"] for r in ok])
+            record[f"pooled_{kind}_depth_frames"] = int(sum(r.metrics[f"{kind}_depth_frames"] for r in ok))
         record["decoy_switches_total"] = int(sum(r.metrics["decoy_switches"] for r in ok))
         record["crashes"] = int(sum(bool(r.metrics["crashed"]) for r in ok))
         scores_ground = runs[0].spec.perception != "oracle" and runs[0].spec.depth_kind == "ground"
