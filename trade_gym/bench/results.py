@@ -1,4 +1,4 @@
-"""results.json: per-run metrics and timing, the per-configuration summary and the run's meta
+"""results.json: per-run metrics, trajectory hashes and timing, the per-configuration summary and the run's meta
 (commit, date, CPU, package versions, renderer), with NaN written as null; its JSON schema ships here.
 """
 
@@ -85,7 +85,8 @@ def run_record(result: RunResult) -> dict[str, Any]:
     s = result.spec
     return spec_record(s) | {"run_id": s.run_id, "seed": s.seed, "steps_requested": s.steps,
                              "camera_size": s.camera_size, "env_kwargs": s.env_kwargs(),
-                             "metrics": dict(result.metrics), "timing": asdict(result.timing), "error": result.error}
+                             "metrics": dict(result.metrics), "trajectory_sha256": result.trajectory_sha256,
+                             "timing": asdict(result.timing), "error": result.error}
 
 
 def build_document(results: Sequence[RunResult], summary: list[dict[str, Any]], meta: dict[str, Any],
@@ -127,6 +128,7 @@ def load_schema() -> dict[str, Any]:
 
 
 def deterministic_part(document: dict[str, Any]) -> dict[str, Any]:
-    """What two runs of the same command must agree on: per-run metrics and errors, and the summary."""
-    return {"runs": [{k: r[k] for k in ("run_id", "metrics", "error")} for r in document["runs"]],
+    """What two runs of the same command must agree on (on any backend): per-run metrics, trajectory hashes and
+    errors, and the summary."""
+    return {"runs": [{k: r[k] for k in ("run_id", "metrics", "trajectory_sha256", "error")} for r in document["runs"]],
             "summary": document["summary"]}
