@@ -11,6 +11,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from trade_gym.bench import plots, reference, report
+from trade_gym.bench.executors import (BACKENDS, DEFAULT_RAY_ADDRESS, RAY_LOCAL, BackendUnavailable, Executor,
+                                       LocalExecutor, RayExecutor, check_ray_address)
 from trade_gym.bench.policies import POLICY_NAMES, available_policies, learned_unavailable_reason
 from trade_gym.bench.results import build_document, collect_meta, load_schema, to_json_safe, write_json
 from trade_gym.bench.runner import RunResult, run_all
@@ -51,7 +53,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", nargs=2, type=int, metavar=("FIRST", "LAST"), help="seed range, inclusive")
     p.add_argument("--steps", type=int, help="episode length [frames at 30 Hz]")
     p.add_argument("--camera-size", type=int, help="camera image side [px]")
-    p.add_argument("--jobs", type=int, help="worker processes (default: the suite's, or 1)")
+    p.add_argument("--jobs", type=int, help="worker processes (default: the suite's, or 1); with --backend ray, "
+                   "only with --ray-address local: the CPUs of its one-node cluster (default: all cores)")
+    p.add_argument("--backend", choices=BACKENDS, default="local", help="local: --jobs processes on this machine "
+                   "(default); ray: one task per run on a Ray cluster (docs/cluster.md)")
+    p.add_argument("--ray-address", metavar="ADDR", help="with --backend ray: auto (default: the cluster this "
+                   "machine joined with `ray start`), local (start a one-node cluster) or ray://HOST:PORT")
     p.add_argument("--out", type=Path, help="output folder (created; its parent must exist)")
     p.add_argument("--video", action="store_true", help="also write a video of the first run (flown again "
                    "with rendering on; mp4, or GIF without an mp4 encoder)")
@@ -121,6 +128,34 @@ def validate_runs(specs: Sequence[RunSpec]) -> None:
             raise UsageError(f"run {spec.config_id}: the env rejects its configuration: {exc}") from None
 
 
+def _check_backend(args: argparse.Namespace) -> None:
+    """--ray-address only with --backend ray (resolved to its default there); --jobs only where it applies."""
+    if args.backend != "ray":
+        if args.ray_address is not None:
+            raise UsageError(f"--ray-address {args.ray_address} needs --backend ray")
+        return
+    args.ray_address = args.ray_address or DEFAULT_RAY_ADDRESS
+    try:
+        check_ray_address(args.ray_address)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if args.jobs is not None and args.ray_address != RAY_LOCAL:
+        raise UsageError(f"--jobs {args.jobs} with --backend ray needs --ray-address {RAY_LOCAL} "
+                         f"(a cluster runs one run per CPU)")
+
+
+def _executor(args: argparse.Namespace, jobs: int) -> Executor:
+    """The backend's executor; a Ray cluster is connected (or started) here, before any episode runs."""
+    if args.backend == "local":
+        return LocalExecutor(jobs)
+    try:
+        executor = RayExecutor(args.ray_address, num_cpus=args.jobs)
+        executor.connect()
+    except BackendUnavailable as exc:
+        raise UsageError(str(exc)) from None
+    return executor
+
+
 def _check_paths(args: argparse.Namespace, selection: Selection) -> None:
     if args.out is None:
         raise UsageError("--out DIR is required")
@@ -166,7 +201,7 @@ def write_outputs(args: argparse.Namespace, results: list[RunResult], argv: Sequ
         from trade_gym.bench.video import record_video
 
         video = record_video(first_ok.spec, out / "video").name
-    meta = collect_meta(args.suite, argv, jobs, len(results), wall_s)
+    meta = collect_meta(args.suite, argv, jobs, len(results), wall_s, args.backend, args.ray_address)
     names = [p.name for p in written]
     document = build_document(results, summary, meta, names, video)
     titles = {g.name: g.title for g in SUITES.get(args.suite or "", ())}
@@ -192,20 +227,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         selection = _selection(args)
+        _check_backend(args)
         specs = expand_suite(args.suite, selection, available_policies())
         validate_runs(specs)
         if args.list:
             print("\n".join(s.run_id + f" ({s.steps} steps, {s.camera_size} px)" for s in specs))
             return 0
         _check_paths(args, selection)
+        executor = _executor(args, args.jobs or SUITE_JOBS.get(args.suite or "", DEFAULT_CUSTOM_JOBS))
     except UsageError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    jobs = args.jobs or SUITE_JOBS.get(args.suite or "", DEFAULT_CUSTOM_JOBS)
-    args.out.mkdir(exist_ok=True)
-    start = time.perf_counter()
-    results = run_all(specs, jobs, _progress(start))
-    wall_s = time.perf_counter() - start
+    try:
+        jobs = executor.workers()
+        args.out.mkdir(exist_ok=True)
+        start = time.perf_counter()
+        results = run_all(specs, on_done=_progress(start), executor=executor)
+        wall_s = time.perf_counter() - start
+    finally:
+        executor.close()
     write_outputs(args, results, argv, jobs, wall_s)
     status = 0
     if failed := [r for r in results if r.error]:

@@ -1,5 +1,5 @@
 """results.json: per-run metrics, trajectory hashes and timing, the per-configuration summary and the run's meta
-(commit, date, CPU, package versions, renderer), with NaN written as null; its JSON schema ships here.
+(commit, date, CPU, package versions, renderer, backend), with NaN written as null; its JSON schema ships here.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from trade_gym.bench.summary import spec_record
 SCHEMA_VERSION = 1
 SCHEMA_FILE = "results.schema.json"
 PACKAGES = ("numpy", "pybullet", "gymnasium", "opencv-python-headless", "onnxruntime", "stable-baselines3",
-            "filterpy", "matplotlib", "trade-gym")
+            "filterpy", "matplotlib", "ray", "trade-gym")
 RENDERER = "TinyRenderer"  # pybullet DIRECT mode's software renderer (the env's default)
 GIT_TIMEOUT_S = 5.0
 
@@ -61,8 +61,10 @@ def package_versions() -> dict[str, str]:
     return versions
 
 
-def collect_meta(suite: str | None, argv: Sequence[str], jobs: int, n_runs: int, wall_s: float) -> dict[str, Any]:
-    """Where and when the numbers were measured (the repository is found from this file's location)."""
+def collect_meta(suite: str | None, argv: Sequence[str], jobs: int, n_runs: int, wall_s: float,
+                 backend: str = "local", ray_address: str | None = None) -> dict[str, Any]:
+    """Where and when the numbers were measured (the repository is found from this file's location); `jobs` is
+    how many runs executed at once (local worker processes, or the Ray cluster's CPUs)."""
     return {
         "suite": suite,
         "argv": list(argv),
@@ -76,6 +78,8 @@ def collect_meta(suite: str | None, argv: Sequence[str], jobs: int, n_runs: int,
         "packages": package_versions(),
         "renderer": RENDERER,
         "jobs": jobs,
+        "backend": backend,
+        "ray_address": ray_address,
         "runs": n_runs,
         "wall_s": wall_s,
     }

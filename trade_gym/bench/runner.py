@@ -1,20 +1,19 @@
-"""Runs benchmark episodes, serially or in worker processes, and scores each one.
+"""Flies and scores one benchmark episode (`run_spec`); `trade_gym.bench.executors` decides where runs execute.
 
-A run's scores (`metrics`) and its `trajectory_sha256` depend only on its spec, so serial and parallel runs
-agree exactly; wall-clock figures are kept apart in `timing`.
+A run's scores (`metrics`) and its `trajectory_sha256` depend only on its spec, so serial, parallel and
+Ray runs agree exactly; wall-clock figures are kept apart in `timing`.
 """
 
 from __future__ import annotations
 
 import hashlib
-import multiprocessing
 import os
 import sys
 import time
 import traceback
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -43,9 +42,10 @@ from trade_gym.bench.policies import make_policy  # noqa: E402
 from trade_gym.bench.suites import RunSpec  # noqa: E402
 from trade_gym.env import TradeFollowEnv  # noqa: E402
 
+if TYPE_CHECKING:
+    from trade_gym.bench.executors import Executor
+
 FloatArray = npt.NDArray[np.float64]
-# Worker processes start fresh ("spawn"): no pybullet client or thread pool is inherited.
-WORKER_START_METHOD = "spawn"
 # Relative cost of a step that renders and runs the stack against an oracle step (measured ~30-60x);
 # used only to submit the longest runs first, which shortens the parallel makespan.
 RENDERING_STEP_COST = 40.0
@@ -169,26 +169,11 @@ def estimated_cost(spec: RunSpec) -> float:
 
 
 def run_all(specs: Sequence[RunSpec], jobs: int = 1,
-            on_done: Callable[[int, int, RunResult], None] | None = None) -> list[RunResult]:
-    """Results of `specs` in their order; `jobs` > 1 runs them in that many worker processes.
-    `on_done(n_done, n_total, result)` is called as each run finishes (in completion order)."""
-    if jobs < 1:
-        raise ValueError(f"jobs must be >= 1, got {jobs!r}")
-    results: list[RunResult | None] = [None] * len(specs)
+            on_done: Callable[[int, int, RunResult], None] | None = None,
+            executor: Executor | None = None) -> list[RunResult]:
+    """Results of `specs` in their order, run by `executor` (default: `LocalExecutor(jobs)`: this process for
+    `jobs` = 1, else that many worker processes). `on_done(n_done, n_total, result)` is called as each run
+    finishes (in completion order)."""
+    from trade_gym.bench.executors import LocalExecutor  # executors imports this module
 
-    def finish(index: int, result: RunResult) -> None:
-        results[index] = result
-        if on_done is not None:
-            on_done(sum(r is not None for r in results), len(specs), result)
-
-    if jobs == 1 or len(specs) <= 1:
-        for index, spec in enumerate(specs):
-            finish(index, run_spec(spec))
-        return results  # type: ignore[return-value]
-    context = multiprocessing.get_context(WORKER_START_METHOD)
-    with ProcessPoolExecutor(max_workers=min(jobs, len(specs)), mp_context=context) as pool:
-        order = sorted(range(len(specs)), key=lambda i: -estimated_cost(specs[i]))
-        futures = {pool.submit(run_spec, specs[index]): index for index in order}
-        for future in as_completed(futures):
-            finish(futures[future], future.result())
-    return results  # type: ignore[return-value]
+    return (executor or LocalExecutor(jobs)).map(specs, on_done)
