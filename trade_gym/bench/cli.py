@@ -128,6 +128,22 @@ def validate_runs(specs: Sequence[RunSpec]) -> None:
             raise UsageError(f"run {spec.config_id}: the env rejects its configuration: {exc}") from None
 
 
+def _check_paths(args: argparse.Namespace, selection: Selection) -> None:
+    if args.out is None:
+        raise UsageError("--out DIR is required")
+    if not args.out.parent.is_dir():
+        raise UsageError(f"--out {args.out}: parent folder {args.out.parent} does not exist")
+    if args.out.exists() and not args.out.is_dir():
+        raise UsageError(f"--out {args.out} exists and is not a folder")
+    if args.write_reference is not None:
+        if args.suite != "quick" or selection != Selection():
+            raise UsageError("--write-reference needs --suite quick without filters or overrides")
+        if not args.write_reference.parent.is_dir():
+            raise UsageError(f"--write-reference {args.write_reference}: parent folder does not exist")
+    if args.check_reference is not None and not args.check_reference.is_file():
+        raise UsageError(f"--check-reference {args.check_reference}: no such file")
+
+
 def _check_backend(args: argparse.Namespace) -> None:
     """--ray-address only with --backend ray (resolved to its default there); --jobs only where it applies."""
     if args.backend != "ray":
@@ -144,32 +160,16 @@ def _check_backend(args: argparse.Namespace) -> None:
                          f"(a cluster runs one run per CPU)")
 
 
-def _executor(args: argparse.Namespace, jobs: int) -> Executor:
+def _executor(args: argparse.Namespace) -> Executor:
     """The backend's executor; a Ray cluster is connected (or started) here, before any episode runs."""
     if args.backend == "local":
-        return LocalExecutor(jobs)
+        return LocalExecutor(args.jobs or SUITE_JOBS.get(args.suite or "", DEFAULT_CUSTOM_JOBS))
     try:
         executor = RayExecutor(args.ray_address, num_cpus=args.jobs)
         executor.connect()
     except BackendUnavailable as exc:
         raise UsageError(str(exc)) from None
     return executor
-
-
-def _check_paths(args: argparse.Namespace, selection: Selection) -> None:
-    if args.out is None:
-        raise UsageError("--out DIR is required")
-    if not args.out.parent.is_dir():
-        raise UsageError(f"--out {args.out}: parent folder {args.out.parent} does not exist")
-    if args.out.exists() and not args.out.is_dir():
-        raise UsageError(f"--out {args.out} exists and is not a folder")
-    if args.write_reference is not None:
-        if args.suite != "quick" or selection != Selection():
-            raise UsageError("--write-reference needs --suite quick without filters or overrides")
-        if not args.write_reference.parent.is_dir():
-            raise UsageError(f"--write-reference {args.write_reference}: parent folder does not exist")
-    if args.check_reference is not None and not args.check_reference.is_file():
-        raise UsageError(f"--check-reference {args.check_reference}: no such file")
 
 
 def _progress(start: float) -> Callable[[int, int, RunResult], None]:
@@ -234,18 +234,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             print("\n".join(s.run_id + f" ({s.steps} steps, {s.camera_size} px)" for s in specs))
             return 0
         _check_paths(args, selection)
-        executor = _executor(args, args.jobs or SUITE_JOBS.get(args.suite or "", DEFAULT_CUSTOM_JOBS))
+        executor = _executor(args)
     except UsageError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    jobs = executor.workers()
+    args.out.mkdir(exist_ok=True)
+    start = time.perf_counter()
     try:
-        jobs = executor.workers()
-        args.out.mkdir(exist_ok=True)
-        start = time.perf_counter()
         results = run_all(specs, on_done=_progress(start), executor=executor)
-        wall_s = time.perf_counter() - start
     finally:
         executor.close()
+    wall_s = time.perf_counter() - start
     write_outputs(args, results, argv, jobs, wall_s)
     status = 0
     if failed := [r for r in results if r.error]:
