@@ -189,6 +189,7 @@ def test_run_all_parallel_metrics_equal_serial_on_oracle_runs():
     assert [r.spec for r in parallel] == specs
     # NaN (undefined scores) compared as null, as results.json stores them
     assert to_json_safe([r.metrics for r in parallel]) == to_json_safe([r.metrics for r in serial])
+    assert [r.trajectory_sha256 for r in parallel] == [r.trajectory_sha256 for r in serial]
     assert all(r.error is None and r.metrics["steps"] == 25 for r in parallel)
     np.testing.assert_array_equal(parallel[3].series.drone_xy_m, serial[3].series.drone_xy_m)
 

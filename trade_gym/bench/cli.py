@@ -13,6 +13,8 @@ from pathlib import Path
 from typing import Any
 
 from trade_gym.bench import plots, reference, report
+from trade_gym.bench.executors import (BACKENDS, DEFAULT_RAY_ADDRESS, RAY_LOCAL, BackendUnavailable, Executor,
+                                       LocalExecutor, RayExecutor, check_ray_address)
 from trade_gym.bench.policies import POLICY_NAMES, available_policies, learned_unavailable_reason
 from trade_gym.bench.results import (SERIES_FILE, build_document, collect_meta, load_results, load_schema,
                                      to_json_safe, write_json, write_series)
@@ -57,7 +59,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", nargs=2, type=int, metavar=("FIRST", "LAST"), help="seed range, inclusive")
     p.add_argument("--steps", type=int, help="episode length [frames at 30 Hz]")
     p.add_argument("--camera-size", type=int, help="camera image side [px]")
-    p.add_argument("--jobs", type=int, help="worker processes (default: the suite's, or 1)")
+    p.add_argument("--jobs", type=int, help="worker processes (default: the suite's, or 1); with --backend ray, "
+                   "only with --ray-address local: the CPUs of its one-node cluster (default: all cores)")
+    p.add_argument("--backend", choices=BACKENDS, default="local", help="local: --jobs processes on this machine "
+                   "(default); ray: one task per run on a Ray cluster (docs/cluster.md)")
+    p.add_argument("--ray-address", metavar="ADDR", help="with --backend ray: auto (default: the cluster this "
+                   "machine joined with `ray start`), local (start a one-node cluster) or ray://HOST:PORT")
     p.add_argument("--out", type=Path, help="output folder (created; its parent must exist)")
     p.add_argument("--video", action="store_true", help="also write a video of the first run (flown again "
                    "with rendering on; mp4, or GIF without an mp4 encoder)")
@@ -147,7 +154,7 @@ def _identity(spec: RunSpec) -> tuple[Any, ...]:
     return spec.policy, spec.seed, spec.steps, EnvConfig(**spec.env_kwargs())
 
 
-def run_once_each(specs: Sequence[RunSpec], jobs: int,
+def run_once_each(specs: Sequence[RunSpec], executor: Executor,
                   on_done: Callable[[int, int, RunResult], None] | None = None) -> list[RunResult]:
     """Results of `specs` in their order, flying each distinct episode once (groups of a suite may share
     runs, e.g. full TRADE in both the unseen table and its Table 1 rows)."""
@@ -157,7 +164,7 @@ def run_once_each(specs: Sequence[RunSpec], jobs: int,
         if (key := _identity(spec)) not in index:
             index[key] = len(distinct)
             distinct.append(spec)
-    flown = run_all(distinct, jobs, on_done)
+    flown = run_all(distinct, on_done=on_done, executor=executor)
     return [dataclasses.replace(flown[index[_identity(s)]], spec=s) for s in specs]
 
 
@@ -175,6 +182,34 @@ def _check_paths(args: argparse.Namespace, selection: Selection) -> None:
             raise UsageError(f"--write-reference {args.write_reference}: parent folder does not exist")
     if args.check_reference is not None and not args.check_reference.is_file():
         raise UsageError(f"--check-reference {args.check_reference}: no such file")
+
+
+def _check_backend(args: argparse.Namespace) -> None:
+    """--ray-address only with --backend ray (resolved to its default there); --jobs only where it applies."""
+    if args.backend != "ray":
+        if args.ray_address is not None:
+            raise UsageError(f"--ray-address {args.ray_address} needs --backend ray")
+        return
+    args.ray_address = args.ray_address or DEFAULT_RAY_ADDRESS
+    try:
+        check_ray_address(args.ray_address)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if args.jobs is not None and args.ray_address != RAY_LOCAL:
+        raise UsageError(f"--jobs {args.jobs} with --backend ray needs --ray-address {RAY_LOCAL} "
+                         f"(a cluster runs one run per CPU)")
+
+
+def _executor(args: argparse.Namespace) -> Executor:
+    """The backend's executor; a Ray cluster is connected (or started) here, before any episode runs."""
+    if args.backend == "local":
+        return LocalExecutor(args.jobs or SUITE_JOBS.get(args.suite or "", DEFAULT_CUSTOM_JOBS))
+    try:
+        executor = RayExecutor(args.ray_address, num_cpus=args.jobs)
+        executor.connect()
+    except BackendUnavailable as exc:
+        raise UsageError(str(exc)) from None
+    return executor
 
 
 def _progress(start: float) -> Callable[[int, int, RunResult], None]:
@@ -255,6 +290,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.report is not None:
             return render_report(args)
         selection = _selection(args)
+        _check_backend(args)
         specs = expand_suite(args.suite, selection, available_policies())
         validate_runs(specs)
         check_worlds(args.suite, specs)
@@ -262,15 +298,20 @@ def main(argv: Sequence[str] | None = None) -> int:
             print("\n".join(s.run_id + f" ({s.steps} steps, {s.camera_size} px)" for s in specs))
             return 0
         _check_paths(args, selection)
+        executor = _executor(args)
     except UsageError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    jobs = args.jobs or SUITE_JOBS.get(args.suite or "", DEFAULT_CUSTOM_JOBS)
+    jobs = executor.workers()
     args.out.mkdir(exist_ok=True)
     start = time.perf_counter()
-    results = run_once_each(specs, jobs, _progress(start))
+    try:
+        results = run_once_each(specs, executor, _progress(start))
+    finally:
+        executor.close()
     wall_s = time.perf_counter() - start
-    write_outputs(args, results, collect_meta(args.suite, argv, jobs, len(results), wall_s))
+    write_outputs(args, results, collect_meta(args.suite, argv, jobs, len(results), wall_s, args.backend,
+                                              args.ray_address))
     status = 0
     if failed := [r for r in results if r.error]:
         print(f"{PROG}: {len(failed)} of {len(results)} runs failed (see results.md)", file=sys.stderr)

@@ -1,5 +1,5 @@
-"""results.json: per-run metrics and timing, the per-configuration summary and the run's meta
-(commit, date, CPU, package versions, renderer), with NaN written as null; its JSON schema ships here.
+"""results.json: per-run metrics, trajectory hashes and timing, the per-configuration summary and the run's meta
+(commit, date, CPU, package versions, renderer, backend), with NaN written as null; its JSON schema ships here.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from trade_gym.bench.summary import spec_record
 SCHEMA_VERSION = 1
 SCHEMA_FILE = "results.schema.json"
 PACKAGES = ("numpy", "pybullet", "gymnasium", "opencv-python-headless", "onnxruntime", "stable-baselines3",
-            "filterpy", "matplotlib", "trade-gym")
+            "filterpy", "matplotlib", "ray", "trade-gym")
 RENDERER = "TinyRenderer"  # pybullet DIRECT mode's software renderer (the env's default)
 GIT_TIMEOUT_S = 5.0
 SERIES_FILE = "series.npz"  # every run's per-frame series, keyed "<run_id>/<field>" (see RunSeries)
@@ -65,8 +65,10 @@ def package_versions() -> dict[str, str]:
     return versions
 
 
-def collect_meta(suite: str | None, argv: Sequence[str], jobs: int, n_runs: int, wall_s: float) -> dict[str, Any]:
-    """Where and when the numbers were measured (the repository is found from this file's location)."""
+def collect_meta(suite: str | None, argv: Sequence[str], jobs: int, n_runs: int, wall_s: float,
+                 backend: str = "local", ray_address: str | None = None) -> dict[str, Any]:
+    """Where and when the numbers were measured (the repository is found from this file's location); `jobs` is
+    how many runs executed at once (local worker processes, or the Ray cluster's CPUs)."""
     return {
         "suite": suite,
         "argv": list(argv),
@@ -80,6 +82,8 @@ def collect_meta(suite: str | None, argv: Sequence[str], jobs: int, n_runs: int,
         "packages": package_versions(),
         "renderer": RENDERER,
         "jobs": jobs,
+        "backend": backend,
+        "ray_address": ray_address,
         "runs": n_runs,
         "wall_s": wall_s,
     }
@@ -89,7 +93,8 @@ def run_record(result: RunResult) -> dict[str, Any]:
     s = result.spec
     return spec_record(s) | {"run_id": s.run_id, "seed": s.seed, "steps_requested": s.steps,
                              "camera_size": s.camera_size, "env_kwargs": s.env_kwargs(),
-                             "metrics": dict(result.metrics), "timing": asdict(result.timing), "error": result.error}
+                             "metrics": dict(result.metrics), "trajectory_sha256": result.trajectory_sha256,
+                             "timing": asdict(result.timing), "error": result.error}
 
 
 def build_document(results: Sequence[RunResult], summary: list[dict[str, Any]], meta: dict[str, Any],
@@ -144,7 +149,8 @@ def load_results(path: Path) -> tuple[list[RunResult], dict[str, Any]]:
         series = (RunSeries(*(arrays[k].astype(np.float64) for k in keys))
                   if arrays is not None and all(k in arrays for k in keys) else None)
         timing = RunTiming(**{k: math.nan if v is None else v for k, v in run["timing"].items()})
-        results.append(RunResult(_spec_of(run), _nan_for_none(run["metrics"]), timing, series, run["error"]))
+        results.append(RunResult(_spec_of(run), _nan_for_none(run["metrics"]), timing, series, run["error"],
+                                 run.get("trajectory_sha256")))
     return results, document["meta"]
 
 
@@ -169,6 +175,7 @@ def load_schema() -> dict[str, Any]:
 
 
 def deterministic_part(document: dict[str, Any]) -> dict[str, Any]:
-    """What two runs of the same command must agree on: per-run metrics and errors, and the summary."""
-    return {"runs": [{k: r[k] for k in ("run_id", "metrics", "error")} for r in document["runs"]],
+    """What two runs of the same command must agree on (on any backend): per-run metrics, trajectory hashes and
+    errors, and the summary."""
+    return {"runs": [{k: r[k] for k in ("run_id", "metrics", "trajectory_sha256", "error")} for r in document["runs"]],
             "summary": document["summary"]}

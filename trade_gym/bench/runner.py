@@ -1,19 +1,19 @@
-"""Runs benchmark episodes, serially or in worker processes, and scores each one.
+"""Flies and scores one benchmark episode (`run_spec`); `trade_gym.bench.executors` decides where runs execute.
 
-A run's scores (`metrics`) depend only on its spec, so serial and parallel runs agree exactly;
-wall-clock figures are kept apart in `timing`.
+A run's scores (`metrics`) and its `trajectory_sha256` depend only on its spec, so serial, parallel and
+Ray runs agree exactly; wall-clock figures are kept apart in `timing`.
 """
 
 from __future__ import annotations
 
-import multiprocessing
+import hashlib
 import os
 import sys
 import time
 import traceback
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -42,12 +42,17 @@ from trade_gym.bench.policies import make_policy  # noqa: E402
 from trade_gym.bench.suites import RunSpec  # noqa: E402
 from trade_gym.env import TradeFollowEnv  # noqa: E402
 
+if TYPE_CHECKING:
+    from trade_gym.bench.executors import Executor
+
 FloatArray = npt.NDArray[np.float64]
-# Worker processes start fresh ("spawn"): no pybullet client or thread pool is inherited.
-WORKER_START_METHOD = "spawn"
 # Relative cost of a step that renders and runs the stack against an oracle step (measured ~30-60x);
 # used only to submit the longest runs first, which shortens the parallel makespan.
 RENDERING_STEP_COST = 40.0
+# Per-frame info entries hashed into `trajectory_sha256`, in this order (1 + 3 + 3 + 4 + 1 + 1 floats a frame).
+TRAJECTORY_KEYS = ("t_s", "drone_position_m", "target_position_m", "est_bbox", "target_depth_est",
+                   "ground_depth_est")
+TRAJECTORY_DTYPE = "<f8"  # little-endian float64, whatever the machine
 
 
 @dataclass(frozen=True)
@@ -78,6 +83,7 @@ class RunResult:
     timing: RunTiming
     series: RunSeries | None
     error: str | None = None  # one line: the exception that ended the run
+    trajectory_sha256: str | None = None  # `trajectory_sha256(infos)`; None on error
 
 
 def _series(infos: list[dict]) -> RunSeries:
@@ -91,6 +97,28 @@ def _series(infos: list[dict]) -> RunSeries:
         drone_xy_m=xy("drone_position_m"),
         target_xy_m=xy("target_position_m"),
     )
+
+
+def trajectory_sha256(infos: Sequence[dict]) -> str:
+    """Hex SHA-256 of the frames' `TRAJECTORY_KEYS` as one row-major (T, 13) little-endian float64 array, NaN
+    written as the one canonical NaN: equal hashes mean the same path, boxes and depths, bit for bit."""
+    rows = [np.concatenate([np.ravel(np.asarray(info[key], dtype=np.float64)) for key in TRAJECTORY_KEYS])
+            for info in infos]
+    frames = np.concatenate(rows).astype(TRAJECTORY_DTYPE) if rows else np.empty(0, TRAJECTORY_DTYPE)
+    frames[np.isnan(frames)] = np.nan
+    return hashlib.sha256(frames.tobytes()).hexdigest()
+
+
+def failed_result(spec: RunSpec, error: str, wall_s: float = float("nan")) -> RunResult:
+    """The record of a run that ended without metrics; `error` is one line."""
+    nan = float("nan")
+    return RunResult(spec, {}, RunTiming(wall_s, nan, nan, nan), None, error)
+
+
+def error_line(exc: BaseException) -> str:
+    """`Type: message` on one line (the message's first line)."""
+    lines = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
 
 
 def fly(spec: RunSpec, on_frame: Callable[[TradeFollowEnv], None] | None = None,
@@ -131,10 +159,8 @@ def run_spec(spec: RunSpec) -> RunResult:
         infos, timing = fly(spec)
     except Exception as exc:  # noqa: BLE001 - one failed run must not end a long benchmark
         last = traceback.extract_tb(exc.__traceback__)[-1]
-        wall = time.perf_counter() - start
-        return RunResult(spec, {}, RunTiming(wall, float("nan"), float("nan"), float("nan")), None,
-                         f"{type(exc).__name__}: {exc} ({last.filename}:{last.lineno})")
-    return RunResult(spec, metrics.episode_metrics(infos), timing, _series(infos))
+        return failed_result(spec, f"{error_line(exc)} ({last.filename}:{last.lineno})", time.perf_counter() - start)
+    return RunResult(spec, metrics.episode_metrics(infos), timing, _series(infos), None, trajectory_sha256(infos))
 
 
 def estimated_cost(spec: RunSpec) -> float:
@@ -143,26 +169,11 @@ def estimated_cost(spec: RunSpec) -> float:
 
 
 def run_all(specs: Sequence[RunSpec], jobs: int = 1,
-            on_done: Callable[[int, int, RunResult], None] | None = None) -> list[RunResult]:
-    """Results of `specs` in their order; `jobs` > 1 runs them in that many worker processes.
-    `on_done(n_done, n_total, result)` is called as each run finishes (in completion order)."""
-    if jobs < 1:
-        raise ValueError(f"jobs must be >= 1, got {jobs!r}")
-    results: list[RunResult | None] = [None] * len(specs)
+            on_done: Callable[[int, int, RunResult], None] | None = None,
+            executor: Executor | None = None) -> list[RunResult]:
+    """Results of `specs` in their order, run by `executor` (default: `LocalExecutor(jobs)`: this process for
+    `jobs` = 1, else that many worker processes). `on_done(n_done, n_total, result)` is called as each run
+    finishes (in completion order)."""
+    from trade_gym.bench.executors import LocalExecutor  # executors imports this module
 
-    def finish(index: int, result: RunResult) -> None:
-        results[index] = result
-        if on_done is not None:
-            on_done(sum(r is not None for r in results), len(specs), result)
-
-    if jobs == 1 or len(specs) <= 1:
-        for index, spec in enumerate(specs):
-            finish(index, run_spec(spec))
-        return results  # type: ignore[return-value]
-    context = multiprocessing.get_context(WORKER_START_METHOD)
-    with ProcessPoolExecutor(max_workers=min(jobs, len(specs)), mp_context=context) as pool:
-        order = sorted(range(len(specs)), key=lambda i: -estimated_cost(specs[i]))
-        futures = {pool.submit(run_spec, specs[index]): index for index in order}
-        for future in as_completed(futures):
-            finish(futures[future], future.result())
-    return results  # type: ignore[return-value]
+    return (executor or LocalExecutor(jobs)).map(specs, on_done)
