@@ -25,7 +25,7 @@ from trade_gym.bench.splits import require_training_worlds
 from trade_gym.config import SCENE_NAMES
 
 ALGOS = ("ppo", "sac")
-FITTED_FIRST_FIX_DELAY_S = 1.7  # benchmarks/results/oracle_noise_fit.json, "fitted"
+FITTED_FIRST_FIX_DELAY_S = 2.6  # benchmarks/results/oracle_noise_fit.json, "fitted"
 DEMO_SEED_OFFSET = 10_000  # demonstrations use seeds seed + 10000 + rank, apart from training's
 
 

@@ -45,14 +45,14 @@ class EnvConfig:
     # None: each reset's seed draws the world too. An int fixes the world (the "sequence") while the
     # reset seed still drives sensor noise, the start shift and the box perturbation (repeated runs).
     world_seed: int | None = None
-    # Oracle noise model (perception="oracle"). Defaults fitted to the TRADE stack's closed-loop errors
-    # (benchmarks/fit_oracle_noise.py: median over scenes; results/oracle_noise_fit.json).
-    oracle_box_sigma_px: float = 1.53  # box jitter per x, y, w, h [px]
-    oracle_depth_sigma_frac: float = 0.0264  # target position noise per camera axis, fraction of depth
-    oracle_velocity_sigma_mps: float = 0.862  # target velocity noise per axis [m/s]
+    # Oracle noise model (perception="oracle"). Defaults fitted to full TRADE's closed-loop errors on training
+    # worlds (benchmarks/fit_oracle_noise.py: median over scenes; results/oracle_noise_fit.json).
+    oracle_box_sigma_px: float = 1.725  # box jitter per x, y, w, h [px]
+    oracle_depth_sigma_frac: float = 0.0136  # target position noise per camera axis, fraction of depth
+    oracle_velocity_sigma_mps: float = 0.446  # target velocity noise per axis [m/s]
     oracle_dropout_prob: float = 0.0  # chance per frame that the estimate is missing
-    oracle_noise_correlation_s: float = 0.92  # correlation time of the noise above [s]; 0 = white
-    # No 3D position/velocity this long after reset [s]. Fitted: 1.7 s (agents.train trains with it); the
+    oracle_noise_correlation_s: float = 0.564  # correlation time of the noise above [s]; 0 = white
+    # No 3D position/velocity this long after reset [s]. Fitted: 2.6 s (agents.train trains with it); the
     # default stays 0 because the estimate's NaN depth in info defeats gymnasium's check_env (NaN != NaN).
     oracle_first_fix_delay_s: float = 0.0
     imu_noise: bool = True
