@@ -22,17 +22,17 @@ from trade_gym.bench.summary import summarise  # noqa: E402
 
 DOC = ROOT / "docs" / "results.md"
 RESULTS_DIR = ROOT / "docs" / "results"
-# (folder under docs/results, section title, what it is), in the order the page shows them
+# (section title, what it is, its runs: folders under docs/results), in the order the page shows them
 SECTIONS = (
-    ("unseen", "Unseen worlds (evaluation split)",
+    ("Unseen worlds (evaluation split)",
      "The paper's protocol on the 20 evaluation worlds per scene, which no parameter, threshold or test was "
      "chosen on (`trade_gym.bench.splits`): one run per world, first frame shifted within 10 frames, initial "
      "box perturbed within 5 px and snapped, 450 frames at 256 px, flown in closed loop by the scripted "
-     "follower. Then Table 1's ablation rows on the first 5 evaluation worlds."),
-    ("paper", "Development world (the paper's reproduction)",
+     "follower. Then Table 1's ablation rows on the first 5 evaluation worlds.", ("unseen",)),
+    ("Development world (the paper's reproduction)",
      "The paper's tables on one development world per scene (`world_seed=0`, the world the stack's parameters "
      "were tuned on), 5 runs per cell for depth and 10 for tracking, each with its own start shift, box "
-     "perturbation, sensor noise and VIO drift."),
+     "perturbation, sensor noise and VIO drift.", ("paper/table1", "paper/table2", "paper/tracking")),
 )
 INTRO = """# Results
 
@@ -44,16 +44,16 @@ paper's own numbers, for comparison: Table 1 full TRADE 0.13 / 1.46 / 0.55 m wit
 """
 
 
-def section(folder: str, title: str, about: str) -> list[str]:
+def run_report(folder: str) -> list[str]:
+    """One run's report (results.md as trade-bench renders it, headings one level down), after its command."""
     source = RESULTS_DIR / folder / "results.json"
     results, meta = load_results(source)
     titles = {g.name: g.title for g in SUITES.get(meta["suite"] or "", ())}
     plots = sorted(p.name for p in (RESULTS_DIR / folder).glob("*.png"))
     failures = [f"{r.spec.run_id}: {r.error}" for r in results if r.error]
     body = render_markdown(summarise(results), meta, titles, failures, plots).splitlines()
-    command = "trade-bench " + " ".join(meta["argv"])
-    out = [f"## {title}", "", about, "", f"Command: `{command}`.", ""]
-    for line in body[1:]:  # the report's own title is replaced by the section's
+    out = [f"Command: `trade-bench {' '.join(meta['argv'])}`.", ""]
+    for line in body[1:]:  # the report's own title: the section's heading stands for it
         if line.startswith("## "):
             line = "#" + line
         out.append(line.replace("](", f"](results/{folder}/") if line.startswith("![") else line)
@@ -62,9 +62,12 @@ def section(folder: str, title: str, about: str) -> list[str]:
 
 def render() -> str:
     lines = INTRO.splitlines() + [""]
-    for folder, title, about in SECTIONS:
-        if (RESULTS_DIR / folder / "results.json").is_file():
-            lines += section(folder, title, about) + [""]
+    for title, about, folders in SECTIONS:
+        present = [f for f in folders if (RESULTS_DIR / f / "results.json").is_file()]
+        if present:
+            lines += [f"## {title}", "", about, ""]
+            for folder in present:
+                lines += run_report(folder) + [""]
     return "\n".join(lines).rstrip() + "\n"
 
 

@@ -119,13 +119,19 @@ def test_shipped_policy_keeps_target_in_view_full_oracle_episode():
     assert np.mean([i["target_visible"] for i in infos]) >= MIN_VISIBLE_FRACTION
 
 
-# desert and city: where the shipped policy beats the scripted follower on oracle perception (model card;
-# in the mountain it is about 10 % behind)
+# The oracle noise the shipped policy was trained with (its model card: the first fit). Under the refitted
+# EnvConfig defaults, less noisy, the scripted follower is closer in the desert and the mountain (card).
+TRAINED_NOISE = {"oracle_box_sigma_px": 1.53, "oracle_depth_sigma_frac": 0.0264, "oracle_velocity_sigma_mps": 0.862,
+                 "oracle_noise_correlation_s": 0.92}
+
+
+# desert and city: where the shipped policy beats the scripted follower on the oracle noise it was trained on
 @pytest.mark.parametrize("scene", ["desert", "city"])
 def test_shipped_policy_follows_closer_than_scripted_on_oracle(scene):
     def mean_distance(make_policy) -> float:
         return float(np.mean([metrics.mean_horizontal_distance(
-            run_episode(make_policy(), seed, max_steps=EVAL_STEPS, scene=scene, perception="oracle"))
+            run_episode(make_policy(), seed, max_steps=EVAL_STEPS, scene=scene, perception="oracle",
+                        **TRAINED_NOISE))
             for seed in EVAL_SEEDS]))
 
     learned, scripted = mean_distance(LearnedFollower), mean_distance(ScriptedFollower)

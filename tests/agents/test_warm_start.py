@@ -20,7 +20,9 @@ from agents.warm_start import (
 )
 
 DEMO = WarmStartConfig(demo_steps=240, action_noise_std=0.3, epochs=200, batch_size=64, learning_rate=3e-3)
-CONFIG = TrainConfig(n_envs=1, scenes=("city",), episode_duration_s=2.0, warm_start=None, critic_warmup_steps=0)
+# 2 s episodes, so the first 3D fix must come sooner than the fitted delay (2.6 s) for the flag to rise in each
+CONFIG = TrainConfig(n_envs=1, scenes=("city",), episode_duration_s=2.0, warm_start=None, critic_warmup_steps=0,
+                     env_kwargs=(("perception", "oracle"), ("oracle_first_fix_delay_s", 1.0)))
 MAX_CLONE_MSE = 2e-3  # the scripted follower is smooth in its inputs; an MLP fits it closely
 GAMMA = 0.9  # short horizon (44 steps to 1 %), so 2 s episodes leave usable returns
 MIN_CRITIC_EXPLAINED_VARIANCE = 0.5
