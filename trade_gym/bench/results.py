@@ -151,7 +151,10 @@ def load_results(path: Path) -> tuple[list[RunResult], dict[str, Any]]:
         timing = RunTiming(**{k: math.nan if v is None else v for k, v in run["timing"].items()})
         results.append(RunResult(_spec_of(run), _nan_for_none(run["metrics"]), timing, series, run["error"],
                                  run.get("trajectory_sha256")))
-    return results, document["meta"]
+    meta = dict(document["meta"])
+    meta.setdefault("backend", "local")  # results.json written before the Ray backend existed: runs were local
+    meta.setdefault("ray_address", None)
+    return results, meta
 
 
 def to_json_safe(value: Any) -> Any:
