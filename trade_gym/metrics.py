@@ -122,19 +122,22 @@ def depth_errors_m(infos: Sequence[Info], kind: str) -> FloatArray:
     return _column(infos, f"{kind}_depth_est") - _column(infos, f"{kind}_depth_gt")
 
 
+def _finite_depth_errors(infos: Sequence[Info], kind: str) -> FloatArray:
+    err = depth_errors_m(infos, kind)
+    return err[np.isfinite(err)]
+
+
 def depth_rmse(infos: Sequence[Info], kind: str) -> float:
     """RMSE [m] of `<kind>_depth_est` against `<kind>_depth_gt` (kind: "ground" or "target") over
     frames where both exist."""
-    err = depth_errors_m(infos, kind)
-    err = err[np.isfinite(err)]
+    err = _finite_depth_errors(infos, kind)
     return float(np.sqrt(np.mean(err ** 2))) if len(err) else float("nan")
 
 
 def depth_bias(infos: Sequence[Info], kind: str) -> float:
     """Mean signed error [m] of `<kind>_depth_est` over frames where both depths exist: negative when the
     estimate is nearer the camera than the truth (e.g. a ground plane fitted to roofs)."""
-    err = depth_errors_m(infos, kind)
-    err = err[np.isfinite(err)]
+    err = _finite_depth_errors(infos, kind)
     return float(np.mean(err)) if len(err) else float("nan")
 
 

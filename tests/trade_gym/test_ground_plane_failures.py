@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 
 from agents import ScriptedFollower
+from trade.planes import MultiRansacConfig
 from trade_gym import metrics
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M
 from trade_gym.env import TradeFollowEnv
 from trade_gym.rollout import fly_episode
 
 STEPS, CAMERA_PX = 300, 256
-MAX_GROUND_TILT_DEG = 30.0  # trade.planes.MultiRansacConfig's default, the ground a vehicle can drive
+MAX_GROUND_TILT_DEG = MultiRansacConfig().max_ground_tilt_deg  # the ground a vehicle can drive (30 deg)
 
 
 @pytest.mark.slow

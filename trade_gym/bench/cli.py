@@ -158,14 +158,15 @@ def run_once_each(specs: Sequence[RunSpec], executor: Executor,
                   on_done: Callable[[int, int, RunResult], None] | None = None) -> list[RunResult]:
     """Results of `specs` in their order, flying each distinct episode once (groups of a suite may share
     runs, e.g. full TRADE in both the unseen table and its Table 1 rows)."""
+    keys = [_identity(spec) for spec in specs]
     index: dict[tuple[Any, ...], int] = {}
     distinct: list[RunSpec] = []
-    for spec in specs:
-        if (key := _identity(spec)) not in index:
+    for spec, key in zip(specs, keys):
+        if key not in index:
             index[key] = len(distinct)
             distinct.append(spec)
     flown = run_all(distinct, on_done=on_done, executor=executor)
-    return [dataclasses.replace(flown[index[_identity(s)]], spec=s) for s in specs]
+    return [dataclasses.replace(flown[index[key]], spec=spec) for spec, key in zip(specs, keys)]
 
 
 def _check_paths(args: argparse.Namespace, selection: Selection) -> None:

@@ -122,13 +122,10 @@ def write_series(path: Path, results: Sequence[RunResult]) -> None:
     np.savez_compressed(path, **arrays)
 
 
-# env keyword arguments every run spec sets itself (the rest of `env_kwargs` is its switches and extras)
-SPEC_ENV_KEYS = ("scene", "perception", "pose_source", "camera_size", "episode_duration_s")
-
-
 def _spec_of(run: dict[str, Any]) -> RunSpec:
     switches = tuple(run["switches"].items())
-    extra = tuple((k, v) for k, v in run["env_kwargs"].items() if k not in SPEC_ENV_KEYS and k not in run["switches"])
+    extra = tuple((k, v) for k, v in run["env_kwargs"].items()
+                  if k not in RunSpec.OWN_ENV_KEYS and k not in run["switches"])
     return RunSpec(run["group"], run["kind"], run["scene"], run["policy"], run["perception"], run["pose_source"],
                    run["seed"], run["steps_requested"], run["camera_size"], switches, extra, run["depth_kind"])
 

@@ -65,6 +65,9 @@ class RunSpec:
         fixed = dict(self.extra).get("world_seed", dict(self.switches).get("world_seed"))
         return self.seed if fixed is None else int(fixed)
 
+    # env keyword arguments every spec sets itself; the rest of `env_kwargs` is its extras and switches
+    OWN_ENV_KEYS = ("scene", "perception", "pose_source", "camera_size", "episode_duration_s")
+
     def env_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of `TradeFollowEnv` for this run; truncation at exactly `steps` frames."""
         return {
