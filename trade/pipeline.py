@@ -58,6 +58,11 @@ class PipelineConfig:
     # half the car's width). Off by default: an exact box is better left as it is (a truck's colour blob
     # is its cargo box alone; city, clean start: mean IoU over 90 frames 0.61 snapped against 0.79).
     snap_initial_box: bool = False
+    # Before the blob snap, the given box is moved to the offset that best separates its colours from its
+    # surround (ColourBoxRefiner.separation), over whole-px shifts up to this fraction of its shorter side
+    # along each axis: a box that is off by more than half its width mostly covers something else, and the
+    # blob at its centre is then the ground or a roof edge beside the target.
+    snap_search_fraction: float = 0.5
     snap_iterations: int = 2  # colour relearning passes of the snap before its blob is judged
     # the snapped box's width and height must each lie within this factor of the given box's (a blob that
     # merges with a neighbour or keeps a sliver is not the target)
@@ -138,6 +143,9 @@ class PipelineConfig:
         if not (math.isfinite(self.reacquire_gate_box_sigma) and self.reacquire_gate_box_sigma > 0):
             raise ValueError("PipelineConfig.reacquire_gate_box_sigma must be finite and > 0, "
                              f"got {self.reacquire_gate_box_sigma!r}")
+        if not (math.isfinite(self.snap_search_fraction) and self.snap_search_fraction >= 0.0):
+            raise ValueError("PipelineConfig.snap_search_fraction must be finite and >= 0 (0: no search), "
+                             f"got {self.snap_search_fraction!r}")
         if not (math.isfinite(self.snap_max_side_ratio) and self.snap_max_side_ratio >= 1.0):
             raise ValueError(f"PipelineConfig.snap_max_side_ratio must be finite and >= 1, got {self.snap_max_side_ratio!r}")
         for name in ("second_window_offset_fraction", "reacquire_step_fraction", "coast_scale_max_relative_sigma"):

@@ -241,7 +241,7 @@ def test_pipeline_redetects_target_away_from_the_coasting_prediction_after_occlu
 
 
 @pytest.mark.parametrize("field, value", [("reacquire_rings", -1), ("reacquire_rings", 1.5), ("snap_iterations", -1),
-                                          ("snap_max_side_ratio", 0.9),
+                                          ("snap_max_side_ratio", 0.9), ("snap_search_fraction", -0.5),
                                           ("reacquire_step_fraction", 0.0), ("reacquire_min_peak_score", np.nan),
                                           ("reacquire_confident_score", np.inf), ("reacquire_gate_chi2", 0.0),
                                           ("reacquire_gate_chi2", np.nan), ("reacquire_gate_box_sigma", 0.0),
@@ -266,10 +266,17 @@ def test_pipeline_snaps_an_initial_box_drawn_off_the_target_to_it():
 
 
 def test_pipeline_keeps_the_initial_box_where_no_plausible_blob_is():
-    """On plain ground (no target under the box) the snap finds no blob it accepts and keeps the box."""
+    """On plain ground (no target under the box) the snap finds no blob it accepts: the box keeps its size,
+    moved at most the search's reach (half its shorter side) by the colour-separation search."""
     scene = PlanarScene.make(size_px=128, fov_deg=90.0, seed=0)
     cam = np.array([0.0, 0.0, ALTITUDE_M])
     image = scene.render(cam, np.array([40.0, 40.0]))  # the target outside the view
     drawn = BBox(50.0, 50.0, 17.0, 17.0)
     pipeline = TradePipeline(PipelineConfig(snap_initial_box=True), scene.intrinsics, np.random.default_rng(0))
-    assert pipeline.initialise(image, drawn, scene.camera_pose(cam), 0.0).box == drawn
+    kept = pipeline.initialise(image, drawn, scene.camera_pose(cam), 0.0).box
+    reach_px = np.floor(PipelineConfig().snap_search_fraction * 17.0)
+    assert (kept.w_px, kept.h_px) == (drawn.w_px, drawn.h_px)
+    assert max(abs(kept.x_px - drawn.x_px), abs(kept.y_px - drawn.y_px)) <= reach_px
+    unsearched = TradePipeline(PipelineConfig(snap_initial_box=True, snap_search_fraction=0.0), scene.intrinsics,
+                               np.random.default_rng(0))
+    assert unsearched.initialise(image, drawn, scene.camera_pose(cam), 0.0).box == drawn

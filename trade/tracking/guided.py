@@ -121,11 +121,28 @@ class GuidedTracker:
         centre = self._box.center
         self._box = BBox.from_center(centre[0], centre[1], factor * output_then.w_px, factor * output_then.h_px)
 
+    def _best_separating(self, image_rgb: ImageRGB, box: BBox) -> BBox:
+        """The given box moved by the whole-px offset, up to snap_search_fraction of its shorter side along
+        each axis, whose colours best separate from its surround (the given box on ties and without search)."""
+        reach = math.floor(self.config.snap_search_fraction * min(box.w_px, box.h_px))
+        best, best_separation = box, self.refiner.separation(image_rgb, box)
+        for dy in range(-reach, reach + 1):
+            for dx in range(-reach, reach + 1):
+                shifted = BBox(box.x_px + dx, box.y_px + dy, box.w_px, box.h_px)
+                if (dx or dy) and _inside(shifted.center, image_rgb):
+                    separation = self.refiner.separation(image_rgb, shifted)
+                    if separation > best_separation:
+                        best, best_separation = shifted, separation
+        return best
+
     def _snapped(self, image_rgb: ImageRGB, box: BBox) -> BBox:
-        """The colour blob at the given box's centre, with the colours relearnt from the blob
-        `snap_iterations` times (a box a few px off mixes ground into the first model, and the blob's
-        contrast is then too low to accept); the blob's tight box when the refiner accepts the last one
-        (colours learnt from it), else the given box (colours learnt from it)."""
+        """The colour blob of the target under the given box: the box first moved to where its colours
+        best separate from their surround (`_best_separating`), then the blob at its centre, with the
+        colours relearnt from the blob `snap_iterations` times (a box a few px off mixes ground into the
+        first model, and the blob's contrast is then too low to accept); the blob's tight box when the
+        refiner accepts the last one (colours learnt from it), else the moved box (colours learnt from it)."""
+        box = self._best_separating(image_rgb, box)
+        self.refiner.init(image_rgb, box)
         candidate = box
         for _ in range(self.config.snap_iterations):
             refinement = self.refiner.refine(image_rgb, candidate.center, box, size_reference=box)

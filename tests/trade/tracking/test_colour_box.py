@@ -255,3 +255,20 @@ def test_refine_before_init_raises() -> None:
 def test_config_invalid_field_raises_naming_it(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         ColourBoxConfig(**{field: value})
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_separation_highest_for_the_box_on_the_car(seed: int) -> None:
+    """A box on the car separates its colours from the surround better than the same box shifted by
+    2-5 px along either axis (half the car's width is 5 px), and the model in use is left untouched."""
+    rng = np.random.default_rng(seed)
+    image, (gt,) = _draw(rng, _sand(rng), _car_paint(rng, RED_RGB), [(np.array([128.3, 121.7]), CAR_WH_PX, 0.0)])
+    refiner = ColourBoxRefiner()
+    on_car = BBox.from_array(gt)
+    refiner.init(image, BBox(10.0, 10.0, 10.0, 26.0))  # a model learnt elsewhere must not change
+    lut = refiner.likelihood_lut.copy()
+    on = refiner.separation(image, on_car)
+    shifted = [refiner.separation(image, BBox(on_car.x_px + dx, on_car.y_px + dy, on_car.w_px, on_car.h_px))
+               for dx, dy in ((2, 0), (-3, 0), (5, 0), (0, 4), (-4, -3), (3, 5))]
+    assert on > max(shifted), (on, shifted)
+    assert np.array_equal(refiner.likelihood_lut, lut)
