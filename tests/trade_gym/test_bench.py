@@ -259,3 +259,19 @@ def test_headline_keeps_tables_drops_details_and_plots():
     out = headline(text)
     assert "| x |" in out and "| 1 |" in out
     assert "| y |" not in out and "p.png" not in out and "<details>" not in out
+
+
+def test_cli_report_with_tables_renders_only_those_groups_and_names_the_ones_there(tmp_path, capsys):
+    args = ["--suite", "quick", "--scenes", "desert", "--policies", "scripted", "--perceptions", "oracle", "dcf",
+            "--steps", "10", "--out", str(tmp_path / "a")]
+    assert cli.main(args) == 0
+    doc = json.loads((tmp_path / "a" / "results.json").read_text())
+    assert sorted(r["group"] for r in doc["runs"]) == ["follow", "tracking"]
+    assert cli.main(["--report", str(tmp_path / "a"), "--tables", "tracking", "--out", str(tmp_path / "b")]) == 0
+    again = json.loads((tmp_path / "b" / "results.json").read_text())
+    assert [r["group"] for r in again["runs"]] == ["tracking"] and again["meta"] == doc["meta"]
+    assert again["summary"] == [s for s in doc["summary"] if s["group"] == "tracking"]
+    capsys.readouterr()
+    assert cli.main(["--report", str(tmp_path / "a"), "--tables", "table1", "--out", str(tmp_path / "c")]) == 2
+    assert capsys.readouterr().err.strip() == (f"trade-bench: error: --tables table1: not in "
+                                               f"{tmp_path / 'a' / 'results.json'} (its groups: follow, tracking)")

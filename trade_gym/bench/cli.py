@@ -49,7 +49,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--suite", choices=tuple(SUITES), help="quick (make demo, ~1-3 min), paper (the paper's "
                    "tables on its development worlds, ~1 h on 2 cores), unseen (the paper's protocol on the 20 "
                    "evaluation worlds per scene, ~1.5 h), tuning (the unseen grid on 20 development worlds, to tune on), full (paper tables at full length plus all followers, hours)")
-    p.add_argument("--tables", nargs="+", metavar="GROUP", help="groups of the suite to run (see --list)")
+    p.add_argument("--tables", nargs="+", metavar="GROUP", help="groups of the suite to run (see --list); with "
+                   "--report, the groups of the earlier run to render")
     p.add_argument("--scenes", nargs="+", choices=SCENE_NAMES)
     p.add_argument("--policies", nargs="+", metavar="POLICY", help=f"any of {', '.join(POLICY_NAMES)}")
     p.add_argument("--perceptions", nargs="+", choices=PERCEPTION_MODES)
@@ -278,6 +279,11 @@ def render_report(args: argparse.Namespace) -> int:
         results, meta = load_results(source)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise UsageError(f"--report {source}: not a trade-bench results.json ({type(exc).__name__}: {exc})") from None
+    if args.tables is not None:  # render only these groups of the run
+        present = list(dict.fromkeys(r.spec.group for r in results))
+        if unknown := [t for t in args.tables if t not in present]:
+            raise UsageError(f"--tables {' '.join(unknown)}: not in {source} (its groups: {', '.join(present)})")
+        results = [r for r in results if r.spec.group in args.tables]
     args.out.mkdir(exist_ok=True)
     write_outputs(args, results, meta)
     print(f"{len(results)} runs of {source} -> {args.out / 'results.md'}")
