@@ -13,6 +13,11 @@ _LAZY = {"LearnedFollower": "agents.learned", "PolicyModelError": "agents.learne
 __all__ = ["AgentError", "LearnedFollower", "Policy", "PolicyModelError", "ScriptedFollower", "ScriptedFollowerConfig"]
 
 
+def __dir__() -> list[str]:
+    """The module's names with the lazy ones, as a user's completion and `dir(agents)` expect."""
+    return sorted(set(globals()) | set(_LAZY))
+
+
 def __getattr__(name: str) -> Any:
     if name in _LAZY:
         import importlib

@@ -3,9 +3,13 @@
 `import trade_gym` registers `TradeFollow-v0`.
 """
 
-from gymnasium.envs.registration import register, registry
+from trade_gym.sim.quiet_import import import_pybullet_quietly
 
-from trade_gym.config import CAMERA_RATE_HZ, EnvConfig
+import_pybullet_quietly()  # before any module of the package imports pybullet: its banner is not ours to print
+
+from gymnasium.envs.registration import register, registry  # noqa: E402
+
+from trade_gym.config import CAMERA_RATE_HZ, EnvConfig  # noqa: E402
 
 ENV_ID = "TradeFollow-v0"
 DEFAULT_MAX_EPISODE_STEPS = int(EnvConfig().episode_duration_s * CAMERA_RATE_HZ)

@@ -198,3 +198,19 @@ def test_depth_only_mode_needs_the_ground_mask_turned_off_explicitly():
     with pytest.raises(ValueError, match="single_image_depth.*ground_mask"):
         gym.make("TradeFollow-v0", single_image_depth=True)
     gym.make("TradeFollow-v0", single_image_depth=True, ground_mask=False, camera_size=32).close()
+
+
+def test_making_and_stepping_prints_nothing_and_agents_lists_its_lazy_names():
+    """In a fresh interpreter (pybullet not yet imported): gym.make, reset, step and close write nothing to
+    stdout or stderr (pybullet's C import prints a build-time banner on fd 2), and dir(agents) lists the
+    names that load lazily."""
+    import subprocess
+    import sys
+
+    code = ("import gymnasium as gym, trade_gym, agents\n"
+            "env = gym.make('TradeFollow-v0', perception='oracle')\n"
+            "env.reset(seed=0); env.step(env.action_space.sample()); env.close()\n"
+            "assert {'LearnedFollower', 'PolicyModelError', 'ScriptedFollower'} <= set(dir(agents)), dir(agents)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == "" and done.stderr == "", (done.stdout, done.stderr)
