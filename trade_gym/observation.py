@@ -25,7 +25,8 @@ TIME_BOUND_S = 3600.0
 # (key, start, end) of each observation entry in the flat buffer `build_observation` fills, in the
 # order of `OBSERVATION_SIZES`.
 OBSERVATION_SIZES = (("target_pos_rel_m", 3), ("target_vel_mps", 3), ("drone_vel_mps", 3), ("bbox_norm", 4),
-                     ("target_depth_m", 1), ("track_valid", 1), ("time_lost_s", 1), ("imu", 6))
+                     ("target_depth_m", 1), ("track_valid", 1), ("time_lost_s", 1), ("imu", 6),
+                     ("estimate_age_s", 1))
 _ends = np.cumsum([n for _, n in OBSERVATION_SIZES]).tolist()
 _LAYOUT = tuple((key, end - n, end) for (key, n), end in zip(OBSERVATION_SIZES, _ends))
 
@@ -50,6 +51,7 @@ def observation_space() -> spaces.Dict:
                 np.array([IMU_ACCEL_BOUND_MPS2] * 3 + [IMU_GYRO_BOUND_RADPS] * 3, np.float32),
                 dtype=np.float32,
             ),
+            "estimate_age_s": box(TIME_BOUND_S, 1, low=0.0),
         }
     )
 
@@ -61,9 +63,11 @@ def build_observation(
     drone_velocity_world_mps: FloatArray,
     imu: ImuBatch,
     time_lost_s: float,
+    estimate_age_s: float,
     image_size_px: int,
 ) -> dict[str, np.ndarray]:
-    """Map an estimate and the drone's own state to the observation dict (float32, clipped).
+    """Map an estimate and the drone's own state to the observation dict (float32, clipped); `estimate_age_s`
+    is the estimate's age [s] (`trade_gym.latency`).
 
     Written with scalar math: this runs every env step and numpy's per-call overhead on
     3-vectors would dominate it."""
@@ -98,9 +102,10 @@ def build_observation(
         1.0 if estimate.valid else 0.0,
         min(time_lost_s, TIME_BOUND_S),
         *imu_values,
+        min(max(estimate_age_s, 0.0), TIME_BOUND_S),
     ]
     # One float32 buffer per step (fresh each call), handed out as per-key views: one array
-    # construction instead of eight.
+    # construction instead of nine.
     flat = np.array(values, np.float32)
     return {key: flat[lo:hi] for key, lo, hi in _LAYOUT}
 
