@@ -75,13 +75,13 @@ def build_observation(
 
     def heading(v: FloatArray, bound: float) -> list[float]:
         # R_heading_world v = Rz(yaw)^T v, clipped to the space's bounds; zeros when unknown
-        x, y, z = float(v[0]), float(v[1]), float(v[2])
+        x, y, z = v.tolist()
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             return [0.0, 0.0, 0.0]
         return [_clip(c * x + s * y, bound), _clip(-s * x + c * y, bound), _clip(z, bound)]
 
     rel = estimate.position_world_m - drone_position_est_m
-    x, y, w, h = (float(v) for v in estimate.bbox)
+    x, y, w, h = estimate.bbox.tolist()
     if all(math.isfinite(v) for v in (x, y, w, h)):
         bbox_norm = [min(max(v / image_size_px, 0.0), 1.0) for v in (x + w / 2.0, y + h / 2.0, w, h)]
     else:
@@ -89,8 +89,9 @@ def build_observation(
     depth = estimate.target_depth_m if math.isfinite(estimate.target_depth_m) else 0.0
     imu_mean = _imu_mean(imu)
     if imu_mean is not None:
-        imu_values = [_clip(float(v), IMU_ACCEL_BOUND_MPS2) for v in imu_mean[:3]]
-        imu_values += [_clip(float(v), IMU_GYRO_BOUND_RADPS) for v in imu_mean[3:]]
+        mean = imu_mean.tolist()
+        imu_values = [_clip(v, IMU_ACCEL_BOUND_MPS2) for v in mean[:3]]
+        imu_values += [_clip(v, IMU_GYRO_BOUND_RADPS) for v in mean[3:]]
     else:
         imu_values = [0.0] * 6
     values = [
