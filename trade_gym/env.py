@@ -100,7 +100,8 @@ class TradeFollowEnv(gym.Env):
 
     ## Arguments
     All fields of `trade_gym.config.EnvConfig`, e.g. `scene`, `perception`, `pose_source`,
-    `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches.
+    `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches,
+    `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0).
 
     ## Version History
     - v0: initial release.
