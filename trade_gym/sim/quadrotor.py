@@ -95,8 +95,9 @@ class Quadrotor:
     """A box-shaped quadrotor flown by velocity (heading frame) and yaw-rate setpoints.
 
     Per physics step: `physics_step(dt_s)`, then `p.stepSimulation`, then `read_state()`.
-    `physics_step` reuses the reading of a `read_state()` made since the last step (saves two
-    pybullet queries), so move the airframe only through `spawn()`, never between those calls.
+    `physics_step` reuses the reading of a `read_state()` made since the last step, and readings between two
+    steps reuse the first (each pybullet state query copies ~30 kB: two per reading), so move the airframe
+    only through `spawn()`, never between those calls.
     Gravity is read from the engine at `spawn()`; the controller compensates it exactly.
     """
 
@@ -119,6 +120,7 @@ class Quadrotor:
         self._m_pre: tuple[float, ...] | None = None  # row-major R_world_body before the last step
         self._gravity_z = 0.0
         self._last_read: tuple[tuple[float, ...], ...] | None = None  # (v, R, body rates) of read_state()
+        self._reading: tuple[tuple[float, ...], ...] | None = None  # `_sample()` since the last step
 
     def spawn(self, position_m: npt.ArrayLike, yaw_rad: float) -> int:
         """Create the airframe at `position_m` (3,) world [m], level, heading `yaw_rad`; returns its id."""
@@ -207,6 +209,7 @@ class Quadrotor:
         p.applyExternalForce(b, _BODY_LINK, (0.0, 0.0, thrust), _ORIGIN, p.LINK_FRAME, physicsClientId=c)
         p.applyExternalTorque(b, _BODY_LINK, torque, p.LINK_FRAME, physicsClientId=c)
         self._v_pre, self._m_pre, self._dt_s = vel, m, float(dt_s)
+        self._reading = None  # the caller steps the simulation next
         self._t_s += float(dt_s)
 
     def fly(self, n_steps: int, dt_s: float, t_s: float,
@@ -253,6 +256,10 @@ class Quadrotor:
         R_world_body, body rates R^T w and specific force R_pre^T ((v - v_pre)/dt - g)."""
         if self.body_id is None:
             raise RuntimeError("Quadrotor state read before spawn()")
+        if self._reading is not None:  # no step since: the same state
+            pos, vel, w, m, w_body, f_body = self._reading
+            self._last_read = (vel, m, w_body)
+            return self._reading
         c, b = self.client_id, self.body_id
         pos, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
         vel, w = p.getBaseVelocity(b, physicsClientId=c)
@@ -269,7 +276,8 @@ class Quadrotor:
         az -= self._gravity_z  # f = a - g
         f_body = (mp[0] * ax + mp[3] * ay + mp[6] * az, mp[1] * ax + mp[4] * ay + mp[7] * az,
                   mp[2] * ax + mp[5] * ay + mp[8] * az)
-        return pos, vel, w, m, w_body, f_body
+        self._reading = (pos, vel, w, m, w_body, f_body)
+        return self._reading
 
     def read_imu_truth(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """(specific force (3,) body [m/s^2], angular rate (3,) body [rad/s]) after the last step:
