@@ -66,7 +66,7 @@ class TradeFollowEnv(gym.Env):
     | track_valid | 1 | {0, 1} | 1 when the estimate held brought a fresh box at its frame |
     | time_lost_s | 1 | [0, 3600] s | time since the last estimate held with a fresh box |
     | imu | 6 | +-16 g, +-2000 deg/s | mean specific force and angular rate over the frame |
-    | estimate_age_s | 1 | [0, 3600] s | this frame's time minus the time of the frame the estimate is from (0 without latency) |
+    | estimate_age_s | 1 | [0, 3600] s | age of the estimate held: now minus its frame's time (0 without latency) |
 
     The drone's own entries (`drone_vel_mps`, `imu`, the pose the relative position is taken from) are always
     this frame's; the target's entries are the estimate held (see Perception Latency).
