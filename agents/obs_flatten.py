@@ -25,6 +25,8 @@ FEATURE_LAYOUT: tuple[tuple[str, int, float, float], ...] = (
     ("time_lost_s", 1, 0.0, 3.0),  # [s]
     ("imu", 6, 0.0, 10.0),  # [m/s^2] and [rad/s]; gravity reads about +1
 )
+# Not a feature: `estimate_age_s` (perception latency, issue 22) came after the shipped policy was trained, so it
+# is left out and the policy's input is unchanged.
 FEATURE_CLIP = 10.0
 # One derived feature: 1 once the perception has a 3D position (the relative position is non-zero).
 N_DERIVED = 1

@@ -87,10 +87,14 @@ def main() -> None:
         base.append(_measure(args.base, args.scene, args.steps))
         new.append(_measure(HERE, args.scene, args.steps))
     ratios = [n["cpu_steps_per_s"] / b["cpu_steps_per_s"] for b, n in zip(base, new)]
+    meta = run_meta(args.base)  # both commits, date, CPU, cores, load
     result = {
         "scene": args.scene,
         "steps_per_round": args.steps,
-        "base_commit": _commit(args.base),
+        "base_commit": meta["base_commit"],
+        "new_commit": meta["new_commit"],
+        "cpu": meta["cpu"],
+        "cores": meta["cores"],
         "base_cpu_steps_per_s": [round(b["cpu_steps_per_s"], 1) for b in base],
         "new_cpu_steps_per_s": [round(n["cpu_steps_per_s"], 1) for n in new],
         "base_wall_steps_per_s": [round(b["wall_steps_per_s"], 1) for b in base],

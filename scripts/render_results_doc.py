@@ -33,6 +33,12 @@ SECTIONS = (
      "The paper's tables on one development world per scene (`world_seed=0`, the world the stack's parameters "
      "were tuned on), 5 runs per cell for depth and 10 for tracking, each with its own start shift, box "
      "perturbation, sensor noise and VIO drift.", ("paper/table1", "paper/table2", "paper/tracking")),
+    ("Perception latency (development world)",
+     "Full TRADE with ground-truth pose on development world 0 of each scene, 450 frames at 256 px, flown by "
+     "the scripted and the learned follower with a fixed perception latency (`perception_latency=\"fixed\"`): "
+     "the estimate of a frame reaches the observation 0, 33, 100, 200 or 400 ms later. Scores are of the "
+     "estimate the policy holds against the current frame's truth (VOT's real-time rule). One run per cell.",
+     ("latency",)),
 )
 INTRO = """# Results
 

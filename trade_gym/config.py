@@ -13,6 +13,10 @@ PERCEPTION_MODES = ("trade", "dcf", "oracle")
 POSE_SOURCES = ("gt", "vio")
 RENDER_MODES = (None, "rgb_array")
 SCENE_NAMES = ("desert", "city", "mountain")
+# When an estimate reaches the observation (`trade_gym.latency`): at once, a fixed delay after its frame, or
+# after the stack's own measured compute time for that frame.
+LATENCY_MODES = ("none", "fixed", "measured")
+MS_PER_S = 1000.0
 
 PHYSICS_RATE_HZ = 240
 CAMERA_RATE_HZ = 30
@@ -57,12 +61,18 @@ class EnvConfig:
     oracle_first_fix_delay_s: float = 0.0
     imu_noise: bool = True
     render_oracle_frames: bool = False  # render the camera even in oracle mode (for the GT box)
+    # Perception latency (`trade_gym.latency`): "none" (the estimate of a frame is in that frame's observation),
+    # "fixed" (it arrives perception_latency_ms after its frame) or "measured" (after perception's wall-clock
+    # compute time for that frame: not deterministic). perception_latency_ms only with "fixed" [ms].
+    perception_latency: str = "none"
+    perception_latency_ms: float | None = None
 
     def __post_init__(self) -> None:
         _check_choice("scene", self.scene, SCENE_NAMES)
         _check_choice("perception", self.perception, PERCEPTION_MODES)
         _check_choice("pose_source", self.pose_source, POSE_SOURCES)
         _check_choice("render_mode", self.render_mode, RENDER_MODES)
+        _check_latency(self.perception_latency, self.perception_latency_ms)
         if isinstance(self.camera_size, bool) or not isinstance(self.camera_size, int) or self.camera_size < 16:
             raise ValueError(f"camera_size must be an integer >= 16 [px], got {self.camera_size!r}")
         _check_range("camera_fov_deg", self.camera_fov_deg, 10.0, 170.0)
@@ -98,6 +108,11 @@ class EnvConfig:
         return int(round(self.episode_duration_s * CAMERA_RATE_HZ))
 
     @property
+    def perception_latency_s(self) -> float:
+        """The fixed latency [s] ("fixed" mode; 0 otherwise: "measured" measures its own per frame)."""
+        return self.perception_latency_ms / MS_PER_S if self.perception_latency == "fixed" else 0.0
+
+    @property
     def needs_rendering(self) -> bool:
         """Whether a step renders the camera."""
         return self.perception != "oracle" or self.render_mode is not None or self.render_oracle_frames
@@ -106,6 +121,18 @@ class EnvConfig:
 def _check_choice(name: str, value: object, choices: tuple) -> None:
     if value not in choices:
         raise ValueError(f"{name} must be one of {choices}, got {value!r}")
+
+
+def _check_latency(mode: object, latency_ms: object) -> None:
+    _check_choice("perception_latency", mode, LATENCY_MODES)
+    if mode != "fixed":
+        if latency_ms is not None:
+            raise ValueError(f"perception_latency_ms is only used with perception_latency='fixed', got "
+                             f"perception_latency_ms={latency_ms!r} with perception_latency={mode!r}")
+        return
+    if latency_ms is None:
+        raise ValueError("perception_latency='fixed' needs perception_latency_ms (a number >= 0 [ms]), got None")
+    _check_non_negative("perception_latency_ms", latency_ms)
 
 
 def _check_finite_number(name: str, value: object) -> float:

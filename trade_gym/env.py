@@ -7,6 +7,7 @@ the policy's action flows back as a velocity setpoint.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import fields
 from typing import Any
 
@@ -20,6 +21,7 @@ from trade.types import iou
 from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.ground_truth import GroundTruth, VehicleBox, box_corners, compute_ground_truth
+from trade_gym.latency import EstimateDelay
 from trade_gym.observation import build_observation, observation_space
 from trade_gym.perception.base import PerceptionOutput, SensorFilter, SensorFrame
 from trade_gym.perception.factory import make_perception
@@ -44,7 +46,8 @@ class TradeFollowEnv(gym.Env):
     drives along a spline, identical decoys, terrain and buildings. A quadrotor carries a
     body-fixed camera (110 deg FOV, 30 Hz) and an IMU (200 Hz). Each step is one camera frame:
     the action sets a velocity setpoint for 1/30 s of 240 Hz physics, the camera renders, and the
-    perception mode (`trade`, `dcf` or `oracle`) estimates the target.
+    perception mode (`trade`, `dcf` or `oracle`) estimates the target. With `perception_latency` the estimate
+    of a frame reaches the observation later (see Perception Latency).
 
     ## Action Space
     `Box(-1, 1, (4,), float32)`: forward, left and up velocity in the drone's heading frame and
@@ -60,9 +63,26 @@ class TradeFollowEnv(gym.Env):
     | drone_vel_mps | 3 | +-100 m/s | drone velocity, heading frame |
     | bbox_norm | 4 | [0, 1] | estimated box centre and size over the image side (0 if none) |
     | target_depth_m | 1 | [0, 1000] m | estimated camera-frame depth of the target (0 if none) |
-    | track_valid | 1 | {0, 1} | 1 when this frame brought a fresh box |
-    | time_lost_s | 1 | [0, 3600] s | time since the last fresh box |
+    | track_valid | 1 | {0, 1} | 1 when the estimate held brought a fresh box at its frame |
+    | time_lost_s | 1 | [0, 3600] s | time since the last estimate held with a fresh box |
     | imu | 6 | +-16 g, +-2000 deg/s | mean specific force and angular rate over the frame |
+    | estimate_age_s | 1 | [0, 3600] s | age of the estimate held: now minus its frame's time (0 without latency) |
+
+    The drone's own entries (`drone_vel_mps`, `imu`, the pose the relative position is taken from) are always
+    this frame's; the target's entries are the estimate held (see Perception Latency).
+
+    ## Perception Latency
+    `perception_latency="none"` (default): each frame's observation holds that frame's estimate. `"fixed"`: the
+    estimate of frame k reaches the observation at the first frame j with t_j >= t_k + `perception_latency_ms`
+    (within 1e-9 s); until then the observation holds the newest estimate that has arrived (before the first
+    one, a missing estimate: zeros, `track_valid` 0, its age counted from the reset frame). `"fixed"` with 0 ms
+    equals `"none"` exactly. `"measured"`: the latency of frame k is the wall-clock time perception took on it
+    (`perception.reset`/`step`, measured with `time.perf_counter`), so episodes are not deterministic and
+    depend on the machine and its load. The stack still processes every frame (a pipelined stack); an
+    estimate that arrives after a newer one is dropped. Scoring follows what the policy sees, as VOT's
+    real-time experiment does: `info`'s `est_bbox`, `iou`, `on_decoy`, `target_depth_est`, `ground_depth_est`
+    and `est_valid` are the held estimate's (computed by perception for its own frame k), compared with the
+    ground truth of the current frame; `info["estimate_age_s"]` is its age.
 
     ## Rewards
     Sum of `visible`, `centering`, `altitude`, `effort` and `crash` (see `trade_gym.reward`); each
@@ -80,10 +100,14 @@ class TradeFollowEnv(gym.Env):
 
     ## Arguments
     All fields of `trade_gym.config.EnvConfig`, e.g. `scene`, `perception`, `pose_source`,
-    `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches.
+    `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches,
+    `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0).
 
     ## Version History
     - v0: initial release.
+    - v0, issue 22: `perception_latency` and `perception_latency_ms`; the observation gains `estimate_age_s` and
+      `info` the same; `track_valid` and `time_lost_s` describe the estimate held. With the default
+      `perception_latency="none"` every other entry is as before.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -117,6 +141,8 @@ class TradeFollowEnv(gym.Env):
         self._last_frame: CameraFrame | None = None
         self._last_truth: GroundTruth | None = None
         self._last_estimate = PerceptionOutput.missing()
+        self._estimate_delay: EstimateDelay | None = None
+        self._estimate_age_s = 0.0
         self._needs_reset = True
         self._sensor_filter: SensorFilter | None = None
 
@@ -150,7 +176,11 @@ class TradeFollowEnv(gym.Env):
         sensors, truth = self._sense()
         sensors = self._filter_sensors(sensors, truth)
         init_box = self._perturbed_init_box(truth.target_bbox, rng)
+        start_s = time.perf_counter()
         estimate = self.perception.reset(sensors, init_box, truth, rng)
+        compute_s = time.perf_counter() - start_s
+        self._estimate_delay = None if self.config.perception_latency == "none" else EstimateDelay(self._t_s)
+        estimate = self._held_estimate(estimate, compute_s)
         self._last_estimate, self._last_truth = estimate, truth
         obs = self._observe(estimate, sensors)
         info = self._info(truth, estimate, crashed=False, terms=None)
@@ -165,7 +195,9 @@ class TradeFollowEnv(gym.Env):
         crashed = self._advance(action)
         sensors, truth = self._sense()
         sensors = self._filter_sensors(sensors, truth)
+        start_s = time.perf_counter()
         estimate = self.perception.step(sensors, truth)
+        estimate = self._held_estimate(estimate, time.perf_counter() - start_s)
         self._time_lost_s = 0.0 if estimate.valid else self._time_lost_s + self.config.frame_dt_s
         visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
         self._time_target_hidden_s = 0.0 if visible else self._time_target_hidden_s + self.config.frame_dt_s
@@ -222,6 +254,18 @@ class TradeFollowEnv(gym.Env):
         self._np_random, self._np_random_seed = state["np_random"], state["np_random_seed"]
 
     # --------------------------------------------------------------- internals
+    def _held_estimate(self, estimate: PerceptionOutput, compute_s: float) -> PerceptionOutput:
+        """The estimate this frame's observation holds, given perception's estimate of this frame and the
+        wall-clock time [s] it took; sets its age."""
+        if self._estimate_delay is None:
+            self._estimate_age_s = 0.0
+            return estimate
+        measured = self.config.perception_latency == "measured"
+        self._estimate_delay.push(estimate, self._t_s, compute_s if measured else self.config.perception_latency_s)
+        held = self._estimate_delay.deliver(self._t_s)
+        self._estimate_age_s = self._t_s - held.frame_t_s
+        return held.estimate
+
     def _filter_sensors(self, sensors: SensorFrame, truth: GroundTruth) -> SensorFrame:
         if self._sensor_filter is None:
             return sensors
@@ -342,6 +386,7 @@ class TradeFollowEnv(gym.Env):
             drone_velocity_world_mps=self._state.velocity_mps,
             imu=sensors.imu,
             time_lost_s=self._time_lost_s,
+            estimate_age_s=self._estimate_age_s,
             image_size_px=self.config.camera_size,
         )
 
@@ -366,6 +411,7 @@ class TradeFollowEnv(gym.Env):
             "ground_depth_gt": truth.ground_depth_m,
             "ground_depth_est": estimate.ground_depth_m,
             "est_valid": estimate.valid,
+            "estimate_age_s": self._estimate_age_s,
             "crashed": crashed,
             "drone_position_m": drone,
             "target_position_m": truth.target_position_m,

@@ -25,7 +25,8 @@ TIME_BOUND_S = 3600.0
 # (key, start, end) of each observation entry in the flat buffer `build_observation` fills, in the
 # order of `OBSERVATION_SIZES`.
 OBSERVATION_SIZES = (("target_pos_rel_m", 3), ("target_vel_mps", 3), ("drone_vel_mps", 3), ("bbox_norm", 4),
-                     ("target_depth_m", 1), ("track_valid", 1), ("time_lost_s", 1), ("imu", 6))
+                     ("target_depth_m", 1), ("track_valid", 1), ("time_lost_s", 1), ("imu", 6),
+                     ("estimate_age_s", 1))
 _ends = np.cumsum([n for _, n in OBSERVATION_SIZES]).tolist()
 _LAYOUT = tuple((key, end - n, end) for (key, n), end in zip(OBSERVATION_SIZES, _ends))
 
@@ -50,6 +51,7 @@ def observation_space() -> spaces.Dict:
                 np.array([IMU_ACCEL_BOUND_MPS2] * 3 + [IMU_GYRO_BOUND_RADPS] * 3, np.float32),
                 dtype=np.float32,
             ),
+            "estimate_age_s": box(TIME_BOUND_S, 1, low=0.0),
         }
     )
 
@@ -61,9 +63,11 @@ def build_observation(
     drone_velocity_world_mps: FloatArray,
     imu: ImuBatch,
     time_lost_s: float,
+    estimate_age_s: float,
     image_size_px: int,
 ) -> dict[str, np.ndarray]:
-    """Map an estimate and the drone's own state to the observation dict (float32, clipped).
+    """Map an estimate and the drone's own state to the observation dict (float32, clipped); `estimate_age_s`
+    is the estimate's age [s] (`trade_gym.latency`).
 
     Written with scalar math: this runs every env step and numpy's per-call overhead on
     3-vectors would dominate it."""
@@ -71,13 +75,13 @@ def build_observation(
 
     def heading(v: FloatArray, bound: float) -> list[float]:
         # R_heading_world v = Rz(yaw)^T v, clipped to the space's bounds; zeros when unknown
-        x, y, z = float(v[0]), float(v[1]), float(v[2])
+        x, y, z = v.tolist()
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             return [0.0, 0.0, 0.0]
         return [_clip(c * x + s * y, bound), _clip(-s * x + c * y, bound), _clip(z, bound)]
 
     rel = estimate.position_world_m - drone_position_est_m
-    x, y, w, h = (float(v) for v in estimate.bbox)
+    x, y, w, h = estimate.bbox.tolist()
     if all(math.isfinite(v) for v in (x, y, w, h)):
         bbox_norm = [min(max(v / image_size_px, 0.0), 1.0) for v in (x + w / 2.0, y + h / 2.0, w, h)]
     else:
@@ -85,8 +89,9 @@ def build_observation(
     depth = estimate.target_depth_m if math.isfinite(estimate.target_depth_m) else 0.0
     imu_mean = _imu_mean(imu)
     if imu_mean is not None:
-        imu_values = [_clip(float(v), IMU_ACCEL_BOUND_MPS2) for v in imu_mean[:3]]
-        imu_values += [_clip(float(v), IMU_GYRO_BOUND_RADPS) for v in imu_mean[3:]]
+        mean = imu_mean.tolist()
+        imu_values = [_clip(v, IMU_ACCEL_BOUND_MPS2) for v in mean[:3]]
+        imu_values += [_clip(v, IMU_GYRO_BOUND_RADPS) for v in mean[3:]]
     else:
         imu_values = [0.0] * 6
     values = [
@@ -98,9 +103,10 @@ def build_observation(
         1.0 if estimate.valid else 0.0,
         min(time_lost_s, TIME_BOUND_S),
         *imu_values,
+        min(max(estimate_age_s, 0.0), TIME_BOUND_S),
     ]
     # One float32 buffer per step (fresh each call), handed out as per-key views: one array
-    # construction instead of eight.
+    # construction instead of nine.
     flat = np.array(values, np.float32)
     return {key: flat[lo:hi] for key, lo, hi in _LAYOUT}
 

@@ -74,3 +74,12 @@ def test_flat_observation_wrapper_matches_function_on_env_observations():
     finally:
         raw_env.close()
         wrapped.close()
+
+
+def test_flatten_ignores_the_estimate_age_the_policy_was_trained_without():
+    obs = sample_observation(0)
+    aged = dict(obs, estimate_age_s=np.array([0.4], np.float32))
+    fresh = dict(obs, estimate_age_s=np.array([0.0], np.float32))
+    assert "estimate_age_s" in observation_space().spaces
+    assert not any(key == "estimate_age_s" for key, _, _, _ in FEATURE_LAYOUT)
+    np.testing.assert_array_equal(flatten_observation(aged)[0], flatten_observation(fresh)[0])

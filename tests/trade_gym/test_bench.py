@@ -275,3 +275,39 @@ def test_cli_report_with_tables_renders_only_those_groups_and_names_the_ones_the
     assert cli.main(["--report", str(tmp_path / "a"), "--tables", "table1", "--out", str(tmp_path / "c")]) == 2
     assert capsys.readouterr().err.strip() == (f"trade-bench: error: --tables table1: not in "
                                                f"{tmp_path / 'a' / 'results.json'} (its groups: follow, tracking)")
+
+
+def test_latency_suite_sweeps_five_latencies_per_scene_and_follower_on_development_worlds():
+    from trade_gym.bench.splits import DEVELOPMENT
+    from trade_gym.bench.suites import LATENCIES_MS
+
+    runs = expand_suite("latency", Selection(), ALL)
+    assert len(runs) == 3 * 2 * 5 and {r.scene for r in runs} == set(SCENE_NAMES)
+    assert {r.policy for r in runs} == {"scripted", "learned"} and {r.perception for r in runs} == {"trade"}
+    assert sorted({r.switch_value("perception_latency_ms") for r in runs}) == sorted(LATENCIES_MS)
+    assert all(r.env_kwargs()["perception_latency"] == "fixed" and r.world_seed in DEVELOPMENT for r in runs)
+    assert "latency/city/learned/trade/gt/perception_latency_ms=33/seed0" in {r.run_id for r in runs}
+    cli.validate_runs(runs)
+    cli.check_worlds("latency", runs)
+
+
+def _latency_result(policy: str, latency_ms: float, error_m: float, tracked: float) -> runner.RunResult:
+    metrics = dict.fromkeys(METRIC_NAMES, 0.0) | {
+        "steps": 450, "tracked_fraction": tracked, "mean_horizontal_error_m": error_m, "decoy_switches": 0,
+        "ground_depth_frames": 0, "target_depth_frames": 0, "crashed": False}
+    spec = RunSpec("latency", "latency", "desert", policy, "trade", "gt", 0, 450, 256,
+                   (("perception_latency_ms", latency_ms),), (("perception_latency", "fixed"),))
+    return runner.RunResult(spec, metrics, runner.RunTiming(1.0, 0.1, 0.9, 20.0), None)
+
+
+def test_latency_report_pivots_error_and_tracked_by_latency_and_plots_them(tmp_path):
+    results = [_latency_result("scripted", 0.0, 0.5, 0.9), _latency_result("scripted", 100.0, 0.75, 0.6),
+               _latency_result("learned", 0.0, 0.4, 0.95), _latency_result("learned", 100.0, 1.25, 0.3)]
+    md = render_markdown(summarise(results), {"commit": "c", "date_utc": "d", "cpu": "x", "cores": 1,
+                                              "renderer": "r", "runs": 4, "wall_s": 1.0, "jobs": 1}, {}, [], [])
+    assert "| scene | follower | 0 ms: error [m] / tracked | 100 ms: error [m] / tracked |" in md
+    assert "| desert | scripted | 0.5 / 0.9 | 0.75 / 0.6 |" in md
+    assert "| desert | learned | 0.4 / 0.95 | 1.25 / 0.3 |" in md
+    assert "scripted trade gt perception_latency_ms=100" in md  # the per-configuration table's label
+    path = plots.plot_latency(results, "t", tmp_path / "latency.png")
+    assert path is not None and path.stat().st_size > 0

@@ -48,7 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
                 "suite and --seeds/--steps/--camera-size override it; without, they define one grid.")
     p.add_argument("--suite", choices=tuple(SUITES), help="quick (make demo, ~1-3 min), paper (the paper's "
                    "tables on its development worlds, ~1 h on 2 cores), unseen (the paper's protocol on the 20 "
-                   "evaluation worlds per scene, ~1.5 h), tuning (the unseen grid on 20 development worlds, to tune on), full (paper tables at full length plus all followers, hours)")
+                   "evaluation worlds per scene, ~1.5 h), tuning (the unseen grid on 20 development worlds, to tune "
+                   "on), latency (full TRADE, scripted and learned followers, every scene, fixed perception latency "
+                   "0-400 ms, 30 runs, ~15 min), full (paper tables at full length plus all followers, hours)")
     p.add_argument("--tables", nargs="+", metavar="GROUP", help="groups of the suite to run (see --list); with "
                    "--report, the groups of the earlier run to render")
     p.add_argument("--scenes", nargs="+", choices=SCENE_NAMES)

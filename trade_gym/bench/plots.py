@@ -137,11 +137,50 @@ def plot_strip(results: Sequence[RunResult], title: str, path: Path) -> Path | N
     return _save(fig, path)
 
 
+LATENCY_KEY = "perception_latency_ms"  # the latency suite's swept env keyword
+LINE_STYLES = ("-", "--", ":", "-.")  # one per follower in the latency plot
+# (metric, axis label) of the latency plot's panels
+LATENCY_METRICS = (("mean_horizontal_error_m", "mean horizontal following error [m]"),
+                   ("tracked_fraction", "tracked fraction (IoU >= 0.3 while visible)"))
+
+
+def plot_latency(results: Sequence[RunResult], title: str, path: Path) -> Path | None:
+    """Each `LATENCY_METRICS` entry against the perception latency [ms]: one line per scene (colour) x follower
+    (line style), the mean over its runs with bars of one sample std when there are several; a panel per metric."""
+    curves: dict[tuple[str, str], dict[float, list[RunResult]]] = {}
+    for r in results:
+        if r.error is None:
+            by_latency = curves.setdefault((r.spec.scene, r.spec.policy), {})
+            by_latency.setdefault(float(r.spec.switch_value(LATENCY_KEY)), []).append(r)
+    if not curves:
+        return None
+    scenes = list(dict.fromkeys(scene for scene, _ in curves))
+    policies = list(dict.fromkeys(policy for _, policy in curves))
+    fig, axes = plt.subplots(1, len(LATENCY_METRICS), figsize=(PANEL_SIZE_IN[0], PANEL_SIZE_IN[1] * 1.3),
+                             squeeze=False)
+    for ax, (name, label) in zip(axes[0], LATENCY_METRICS):
+        for (scene, policy), by_latency in curves.items():
+            latencies = sorted(by_latency)
+            values = [np.array([float(r.metrics[name]) for r in by_latency[v]], dtype=np.float64) for v in latencies]
+            mean = [float(np.mean(v[np.isfinite(v)])) if np.isfinite(v).any() else np.nan for v in values]
+            std = [float(np.std(v[np.isfinite(v)], ddof=1)) if np.isfinite(v).sum() > 1 else 0.0 for v in values]
+            ax.errorbar(latencies, mean, yerr=std, marker="o", ms=3, lw=1.0, capsize=2,
+                        color=f"C{scenes.index(scene) % 10}",
+                        ls=LINE_STYLES[policies.index(policy) % len(LINE_STYLES)], label=f"{scene}: {policy}")
+        ax.set(xlabel="perception latency [ms]", ylabel=label, title=title)
+        ax.grid(alpha=0.3)
+    _legend_right(axes[0][-1])
+    return _save(fig, path)
+
+
 def plot_group(results: Sequence[RunResult], group: str, depth_kind: str, out: Path) -> list[Path]:
     """All figures of one group, written into `out`; returns the files written."""
     depth = f"{depth_kind}_depth_error_m"
+    kind = results[0].spec.kind if results else None
     strip = [plot_strip(results, f"{group}: one dot per world", out / f"{group}_per_world.png")] \
-        if results and results[0].spec.kind == "unseen" else []
+        if kind == "unseen" else []
+    strip += [plot_latency(results, f"{group}: metric against latency", out / f"{group}_vs_latency.png")] \
+        if kind == "latency" else []
     written = strip + [
         plot_per_frame(results, "iou", "IoU (mean over runs)", f"{group} IoU per frame", out / f"{group}_iou.png"),
         plot_per_frame(results, depth, f"|{depth_kind} depth error| [m]", f"{group} {depth_kind} depth error",

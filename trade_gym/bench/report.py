@@ -135,8 +135,27 @@ def unseen_pivot(records: Sequence[Record]) -> list[str]:
     return lines + (["Failed worlds:", ""] + failed if failed else ["No world failed."])
 
 
+LATENCY_KEY = "perception_latency_ms"  # the latency suite's swept env keyword
+
+
+def latency_pivot(records: Sequence[Record]) -> list[str]:
+    """Per scene and follower: mean horizontal following error [m] / tracked fraction at each latency [ms]."""
+    latencies = sorted(dict.fromkeys(r["switches"][LATENCY_KEY] for r in records))
+    rows = []
+    for scene in _scenes(records):
+        for policy in dict.fromkeys(r["policy"] for r in records if r["scene"] == scene):
+            row = [scene, policy]
+            for latency in latencies:
+                r = _find(records, scene=scene, policy=policy, **{LATENCY_KEY: latency})
+                m = r["metrics"] if r else None
+                row.append(f"{mean_pm(m['mean_horizontal_error_m'], 2)} / {mean_pm(m['tracked_fraction'])}"
+                           if m else MISSING)
+            rows.append(row)
+    return table(["scene", "follower"] + [f"{fmt(v)} ms: error [m] / tracked" for v in latencies], rows)
+
+
 PIVOTS = {"table1": table1_pivot, "table2": table2_pivot, "tracking": tracking_pivot, "follow": follow_pivot,
-          "unseen": unseen_pivot}
+          "unseen": unseen_pivot, "latency": latency_pivot}
 
 
 def render_markdown(summary: Sequence[Record], meta: Record, titles: dict[str, str], failures: Sequence[str],

@@ -15,7 +15,7 @@ from trade_gym.config import CAMERA_RATE_HZ, SCENE_NAMES, EnvConfig
 
 Kwargs = tuple[tuple[str, Any], ...]  # sorted (name, value) pairs: hashable env keyword arguments
 # Which table a group renders in results.md (and how its runs are compared).
-GROUP_KINDS = ("follow", "tracking", "table1", "table2", "unseen", "custom")
+GROUP_KINDS = ("follow", "tracking", "table1", "table2", "unseen", "latency", "custom")
 BOOL_SWITCHES = tuple(f.name for f in fields(EnvConfig) if f.type == "bool")
 # The paper's protocol: one sequence per scene (a fixed world), each run of it with its first tracked
 # frame shifted within 10 frames and its initial box perturbed within 5 px (and its own sensor noise);
@@ -31,6 +31,11 @@ UNSEEN_ABLATION_WORLDS = (EVALUATION.first, EVALUATION.first + 4)  # Table 1's a
 # The unseen suite's grid on 20 development worlds, to tune on (the evaluation worlds only report). They
 # start at 100, past the low seeds the tests and the paper's sequence (world 0) use.
 TUNING_WORLDS = (DEVELOPMENT.first + 100, DEVELOPMENT.first + 119)
+# The latency sweep: fixed perception latencies [ms] (0 = none; 33 ~ one frame at 30 Hz; TRADE ran at 5-10 fps
+# onboard, 100-200 ms) on development worlds.
+LATENCIES_MS = (0.0, 33.0, 100.0, 200.0, 400.0)
+LATENCY_PROTOCOL: Kwargs = (("perception_latency", "fixed"),)
+LATENCY_WORLDS = (0, 0)  # development world seeds (reset seed = world seed), first and last
 
 
 @dataclass(frozen=True)
@@ -55,7 +60,7 @@ class RunSpec:
         """Identifies the configuration (everything but the seed)."""
         parts = [self.group, self.scene, self.policy, self.perception, self.pose_source]
         if self.switches:
-            parts.append(",".join(f"{k}={int(v)}" for k, v in self.switches))
+            parts.append(",".join(f"{k}={switch_text(v)}" for k, v in self.switches))
         return "/".join(parts)
 
     @property
@@ -88,6 +93,11 @@ class RunSpec:
         return dict(self.switches).get(name, dict(self.extra).get(name, getattr(EnvConfig(), name)))
 
 
+def switch_text(value: Any) -> str:
+    """A switch value in an id: 0/1 for a bool (as ids always had), the shortest form of a number."""
+    return str(int(value)) if isinstance(value, bool) else f"{value:g}"
+
+
 @dataclass(frozen=True)
 class Selection:
     """Command-line choices. Categorical axes filter a suite (None = keep all); seeds (first, last
@@ -118,7 +128,7 @@ class GroupSpec:
     seeds: tuple[int, int]  # first, last (inclusive)
     steps: int
     camera_size: int
-    switch_grid: tuple[tuple[str, tuple[bool, ...]], ...] = ()
+    switch_grid: tuple[tuple[str, tuple[Any, ...]], ...] = ()  # env keyword -> values (bools, or numbers)
     extra: Kwargs = ()
     depth_kind: str = "ground"
 
@@ -196,6 +206,15 @@ def _unseen_groups(steps: int, camera_size: int, name: str = "unseen", worlds: t
     )
 
 
+def _latency_groups(steps: int, camera_size: int) -> tuple[GroupSpec, ...]:
+    return (
+        GroupSpec("latency", "latency", "Following under perception latency: full TRADE, gt pose, scripted and "
+                  "learned followers, fixed latency per run", ALL_SCENES, ("scripted", "learned"), ("trade",),
+                  ("gt",), LATENCY_WORLDS, steps, camera_size, (("perception_latency_ms", LATENCIES_MS),),
+                  LATENCY_PROTOCOL),
+    )
+
+
 PAPER_STEPS, FULL_STEPS = 450, 900  # 15 s sequences (about an hour on 2 cores); the env's full 30 s
 PAPER_CAMERA_PX = 256
 
@@ -204,13 +223,14 @@ SUITES: dict[str, tuple[GroupSpec, ...]] = {
     "paper": _paper_groups(PAPER_STEPS, PAPER_CAMERA_PX),
     "unseen": _unseen_groups(PAPER_STEPS, PAPER_CAMERA_PX),
     "tuning": _unseen_groups(PAPER_STEPS, PAPER_CAMERA_PX, "tuning", TUNING_WORLDS, "development"),
+    "latency": _latency_groups(PAPER_STEPS, PAPER_CAMERA_PX),
     "full": _paper_groups(FULL_STEPS, PAPER_CAMERA_PX) + (
         GroupSpec("policies", "follow", "Followers on oracle and TRADE perception",
                   ALL_SCENES, ("scripted", "learned", "hover", "random"), ("oracle", "trade"), ("gt",),
                   TRACKING_RUNS, FULL_STEPS, PAPER_CAMERA_PX),
     ),
 }
-SUITE_JOBS = {"quick": 2, "paper": 2, "unseen": 2, "tuning": 2, "full": 2}  # default --jobs per suite
+SUITE_JOBS = {"quick": 2, "paper": 2, "unseen": 2, "tuning": 2, "latency": 2, "full": 2}  # default --jobs per suite
 # Suites that fly evaluation worlds; no other suite or grid may (`trade_gym.bench.splits`).
 EVALUATION_SUITES = ("unseen",)
 

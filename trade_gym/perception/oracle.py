@@ -88,7 +88,7 @@ class OraclePerception:
         vel_noise = noise[7:10] * cfg.velocity_sigma_mps
         ground_noise = float(draws[10])
         dropped = self._rng.random() < cfg.dropout_prob
-        if dropped or not np.all(np.isfinite(truth.target_bbox)):
+        if dropped or not all(math.isfinite(v) for v in truth.target_bbox.tolist()):
             self._last = _coast(self._last, dt_s)
             return self._last
         bbox = truth.target_bbox + box_noise

@@ -95,8 +95,9 @@ class Quadrotor:
     """A box-shaped quadrotor flown by velocity (heading frame) and yaw-rate setpoints.
 
     Per physics step: `physics_step(dt_s)`, then `p.stepSimulation`, then `read_state()`.
-    `physics_step` reuses the reading of a `read_state()` made since the last step (saves two
-    pybullet queries), so move the airframe only through `spawn()`, never between those calls.
+    `physics_step` reuses the reading of a `read_state()` made since the last step, and readings between two
+    steps reuse the first (each pybullet state query copies ~30 kB: two per reading), so move the airframe
+    only through `spawn()`, never between those calls.
     Gravity is read from the engine at `spawn()`; the controller compensates it exactly.
     """
 
@@ -118,7 +119,8 @@ class Quadrotor:
         self._v_pre = (0.0, 0.0, 0.0)
         self._m_pre: tuple[float, ...] | None = None  # row-major R_world_body before the last step
         self._gravity_z = 0.0
-        self._last_read: tuple[tuple[float, ...], ...] | None = None  # (v, w_world, R) of read_state()
+        self._last_read: tuple[tuple[float, ...], ...] | None = None  # (v, R, body rates) of read_state()
+        self._reading: tuple[tuple[float, ...], ...] | None = None  # `_sample()` since the last step
 
     def spawn(self, position_m: npt.ArrayLike, yaw_rad: float) -> int:
         """Create the airframe at `position_m` (3,) world [m], level, heading `yaw_rad`; returns its id."""
@@ -158,12 +160,13 @@ class Quadrotor:
             raise RuntimeError("Quadrotor.physics_step called before spawn()")
         c, b, cfg = self.client_id, self.body_id, self.config
         if self._last_read is not None:  # read_state() after the last step: same pybullet state
-            vel, omega_w, m = self._last_read
+            vel, m, (wx, wy, wz) = self._last_read
             self._last_read = None
         else:
             _, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
             vel, omega_w = p.getBaseVelocity(b, physicsClientId=c)
             m = p.getMatrixFromQuaternion(quat, physicsClientId=c)  # row-major R_world_body
+            wx, wy, wz = _body_rates(m, omega_w)
         yaw = math.atan2(m[3], m[0])
         fx, fy, fz = self._desired_specific_thrust(yaw, vel)
         fn = math.sqrt(fx * fx + fy * fy + fz * fz)
@@ -184,10 +187,6 @@ class Quadrotor:
         ex = 0.5 * ((zdx * yb[0] + zdy * yb[1] + zdz * yb[2]) - (ydx * zb[0] + ydy * zb[1] + ydz * zb[2]))
         ey = 0.5 * ((xdx * zb[0] + xdy * zb[1] + xdz * zb[2]) - (zdx * xb[0] + zdy * xb[1] + zdz * xb[2]))
         ez = 0.5 * ((ydx * xb[0] + ydy * xb[1] + ydz * xb[2]) - (xdx * yb[0] + xdy * yb[1] + xdz * yb[2]))
-        # body rates w_b = R^T w_world
-        wx = m[0] * omega_w[0] + m[3] * omega_w[1] + m[6] * omega_w[2]
-        wy = m[1] * omega_w[0] + m[4] * omega_w[1] + m[7] * omega_w[2]
-        wz = m[2] * omega_w[0] + m[5] * omega_w[1] + m[8] * omega_w[2]
         # yawing at r with z_d fixed turns R_d about z_d at W = r (e_z . z_d) / (1 - (x_c . z_d)^2);
         # desired body rate w_d = W R^T z_d
         xc_dot_zd = cy * zdx + sy * zdy
@@ -210,6 +209,7 @@ class Quadrotor:
         p.applyExternalForce(b, _BODY_LINK, (0.0, 0.0, thrust), _ORIGIN, p.LINK_FRAME, physicsClientId=c)
         p.applyExternalTorque(b, _BODY_LINK, torque, p.LINK_FRAME, physicsClientId=c)
         self._v_pre, self._m_pre, self._dt_s = vel, m, float(dt_s)
+        self._reading = None  # the caller steps the simulation next
         self._t_s += float(dt_s)
 
     def fly(self, n_steps: int, dt_s: float, t_s: float,
@@ -256,11 +256,16 @@ class Quadrotor:
         R_world_body, body rates R^T w and specific force R_pre^T ((v - v_pre)/dt - g)."""
         if self.body_id is None:
             raise RuntimeError("Quadrotor state read before spawn()")
+        if self._reading is not None:  # no step since: the same state
+            pos, vel, w, m, w_body, f_body = self._reading
+            self._last_read = (vel, m, w_body)
+            return self._reading
         c, b = self.client_id, self.body_id
         pos, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
         vel, w = p.getBaseVelocity(b, physicsClientId=c)
         m = p.getMatrixFromQuaternion(quat, physicsClientId=c)  # row-major R_world_body
-        self._last_read = (vel, w, m)
+        w_body = _body_rates(m, w)
+        self._last_read = (vel, m, w_body)
         if self._m_pre is None:  # nothing stepped yet: at rest
             ax = ay = az = 0.0
             mp = m
@@ -269,11 +274,10 @@ class Quadrotor:
             ax, ay, az = (vel[0] - v0[0]) * inv_dt, (vel[1] - v0[1]) * inv_dt, (vel[2] - v0[2]) * inv_dt
             mp = self._m_pre
         az -= self._gravity_z  # f = a - g
-        w_body = (m[0] * w[0] + m[3] * w[1] + m[6] * w[2], m[1] * w[0] + m[4] * w[1] + m[7] * w[2],
-                  m[2] * w[0] + m[5] * w[1] + m[8] * w[2])
         f_body = (mp[0] * ax + mp[3] * ay + mp[6] * az, mp[1] * ax + mp[4] * ay + mp[7] * az,
                   mp[2] * ax + mp[5] * ay + mp[8] * az)
-        return pos, vel, w, m, w_body, f_body
+        self._reading = (pos, vel, w, m, w_body, f_body)
+        return self._reading
 
     def read_imu_truth(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """(specific force (3,) body [m/s^2], angular rate (3,) body [rad/s]) after the last step:
@@ -305,6 +309,13 @@ class Quadrotor:
             return len(contacts) > 0
         ids = static_body_ids if isinstance(static_body_ids, (set, frozenset)) else set(static_body_ids)
         return any(contact[2] in ids for contact in contacts)
+
+
+def _body_rates(m: tuple[float, ...], w_world: tuple[float, ...]) -> tuple[float, float, float]:
+    """Body rates w_b = R^T w_world [rad/s] from row-major R_world_body (9,) and world rates (3,)."""
+    return (m[0] * w_world[0] + m[3] * w_world[1] + m[6] * w_world[2],
+            m[1] * w_world[0] + m[4] * w_world[1] + m[7] * w_world[2],
+            m[2] * w_world[0] + m[5] * w_world[1] + m[8] * w_world[2])
 
 
 def _wrap(angle_rad: float) -> float:
