@@ -38,6 +38,11 @@ ACTION_DIM = 4
 GROUND_RAY_RANGE_M = 1000.0
 
 
+def _depth_or_none(depth_m: float) -> float | None:
+    """A depth for `info`: None where it does not exist (NaN inside the env), as float NaN != NaN."""
+    return None if math.isnan(depth_m) else float(depth_m)
+
+
 class TradeFollowEnv(gym.Env):
     """Follow a ground target from a quadrotor, perceiving it with the TRADE stack.
 
@@ -83,6 +88,14 @@ class TradeFollowEnv(gym.Env):
     real-time experiment does: `info`'s `est_bbox`, `iou`, `on_decoy`, `target_depth_est`, `ground_depth_est`
     and `est_valid` are the held estimate's (computed by perception for its own frame k), compared with the
     ground truth of the current frame; `info["estimate_age_s"]` is its age.
+
+    ## Info
+    Ground truth and the estimate, per step: `t_s`; `gt_bbox` and `est_bbox` (x, y, w, h) [px] (`gt_bbox`
+    NaN while the target is out of view); `iou`; `target_visible`, `target_visible_fraction`; `on_decoy`;
+    `target_depth_gt`, `target_depth_est`, `ground_depth_gt`, `ground_depth_est` [m], each `None` where that
+    depth does not exist (no estimate yet, target or ground not in view: None compares equal to itself, so
+    `check_env` and saved episodes compare); `est_valid`; `estimate_age_s`; `crashed`; `drone_position_m`,
+    `target_position_m`; `horizontal_distance_m`; `decoy_bboxes`; `reward_<term>`.
 
     ## Rewards
     Sum of `visible`, `centering`, `altitude`, `effort` and `crash` (see `trade_gym.reward`); each
@@ -406,10 +419,10 @@ class TradeFollowEnv(gym.Env):
             "target_visible": truth.target_visible_fraction >= self.config.visible_fraction_threshold,
             "target_visible_fraction": truth.target_visible_fraction,
             "on_decoy": bool(best_decoy > est_iou and best_decoy > 0.0),
-            "target_depth_gt": truth.target_depth_m,
-            "target_depth_est": estimate.target_depth_m,
-            "ground_depth_gt": truth.ground_depth_m,
-            "ground_depth_est": estimate.ground_depth_m,
+            "target_depth_gt": _depth_or_none(truth.target_depth_m),
+            "target_depth_est": _depth_or_none(estimate.target_depth_m),
+            "ground_depth_gt": _depth_or_none(truth.ground_depth_m),
+            "ground_depth_est": _depth_or_none(estimate.ground_depth_m),
             "est_valid": estimate.valid,
             "estimate_age_s": self._estimate_age_s,
             "crashed": crashed,

@@ -39,6 +39,8 @@ def _update(h: hashlib._Hash, value) -> None:
         for key in sorted(value):
             h.update(key.encode())
             _update(h, value[key])
+    elif value is None:  # a missing depth in info
+        h.update(b"None")
     elif isinstance(value, (tuple, list)):
         h.update(b"(%d" % len(value))
         for v in value:

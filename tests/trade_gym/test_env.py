@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import gymnasium as gym
@@ -214,3 +215,18 @@ def test_making_and_stepping_prints_nothing_and_agents_lists_its_lazy_names():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout == "" and done.stderr == "", (done.stdout, done.stderr)
+
+
+@pytest.mark.parametrize("perception", ["trade", "dcf"])
+def test_check_env_passes_for_the_image_perceptions_with_missing_depths_as_none(perception):
+    """check_env steps two envs with one seed and compares their infos: a depth that does not exist yet is
+    None (NaN would differ from itself)."""
+    env = gym.make("TradeFollow-v0", scene="desert", perception=perception, **SMALL)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            check_env(env.unwrapped)
+        _, info = env.reset(seed=0)
+        assert info["ground_depth_est"] is None or math.isfinite(info["ground_depth_est"])
+    finally:
+        env.close()
