@@ -7,8 +7,6 @@ Ray runs agree exactly; wall-clock figures are kept apart in `timing`.
 from __future__ import annotations
 
 import hashlib
-import os
-import sys
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -18,22 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-
-def import_pybullet_quietly() -> None:
-    """Import pybullet with file descriptor 2 pointed at /dev/null: its C import prints a build-time
-    banner on stderr, which would break the CLI's one-line errors and its progress line."""
-    if "pybullet" in sys.modules:
-        return
-    sys.stderr.flush()
-    saved = os.dup(2)
-    try:
-        with open(os.devnull, "w") as devnull:
-            os.dup2(devnull.fileno(), 2)
-            import pybullet  # noqa: F401
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-
+from trade_gym.quiet_import import import_pybullet_quietly
 
 import_pybullet_quietly()
 

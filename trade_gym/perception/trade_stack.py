@@ -161,11 +161,16 @@ class TradePerception:
 
     def _ground_depth(self, est: Estimate, truth: GroundTruth, sensors: SensorFrame) -> float:
         """Depth of the estimated ground plane along the ground-truth box centre's ray (the paper's
-        Table 1 quantity: plane quality independent of tracking errors). Depth-only mode: the aligned
-        depth map read at that pixel (which shows the target's top, so it is short by about its height)."""
-        if not np.all(np.isfinite(truth.target_bbox)):
+        Table 1 quantity: plane quality independent of tracking errors)."""
+        return self.ground_depth_at(est, sensors, truth.target_bbox)
+
+    def ground_depth_at(self, est: Estimate, sensors: SensorFrame, box: FloatArray) -> float:
+        """Depth [m] of `est`'s ground plane along the ray of the centre of `box` (x, y, w, h [px]) from the pose
+        of `sensors`; NaN without a box or a plane. Depth-only mode: the aligned depth map read at that pixel
+        (which shows the target's top, so it is short by about its height)."""
+        if not np.all(np.isfinite(box)):
             return float("nan")
-        centre = truth.target_bbox[:2] + truth.target_bbox[2:] / 2.0
+        centre = box[:2] + box[2:] / 2.0
         if est.depth_map_m is not None:
             return float(sample_map(est.depth_map_m, centre.reshape(1, 2))[0])
         if est.plane is None:
