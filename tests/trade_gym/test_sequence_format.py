@@ -197,6 +197,20 @@ def test_trade_replay_refuses_bad_sequence_in_one_line_and_writes_nothing(case, 
     assert not out.exists() and not list(tmp_path.glob(".replay*"))
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["--ablation", "single_image_depth=true"], "the stack rejects these settings"),  # needs ground_mask off
+    (["--ablation", "imu_noise=false"], "unknown switch 'imu_noise'"),  # an env switch, not the stack's
+    (["--ablation", "ground_mask=both"], "value must be true or false"),
+])
+def test_trade_replay_refuses_bad_settings_in_one_line_and_writes_nothing(argv, words, written, tmp_path, capsys):
+    path, _ = written
+    out = tmp_path / "replay"
+    assert replay_main([str(path), *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("trade-replay: error: ") and words in err and "\n" not in err
+    assert not out.exists()
+
+
 # ----------------------------------------------------------------------------- a converted flight log
 def _moving_box_images(n: int, size_px: int, box_px: int, step_px: int) -> list[np.ndarray]:
     """A red box moving right by step_px per frame over a fixed random texture."""

@@ -20,11 +20,11 @@ from pathlib import Path
 from typing import Any
 
 from trade_gym.bench.runner import trajectory_sha256  # first: imports pybullet without its banner
+from trade_gym.perception.trade_stack import STACK_SWITCHES, pipeline_config
 from trade_gym.provenance import cpu_model, git_commit
 from trade_gym.recording.format import SequenceError, json_safe
 from trade_gym.recording.reader import Sequence, open_sequence
 from trade_gym.recording.replay import REPLAY_PERCEPTIONS, ReplayResult, recorded_settings, replay
-from trade_gym.perception.trade_stack import STACK_SWITCHES
 
 PROG = "trade-replay"
 EXIT_USAGE = 2
@@ -140,7 +140,7 @@ def main(argv: Seq[str] | None = None) -> int:
         sequence = open_sequence(args.sequence)
         try:
             settings = recorded_settings(sequence, args.perception, overrides)
-            settings.env_config()
+            pipeline_config(settings.env_config())  # the stack's own checks of the switches, before it runs
         except ValueError as exc:
             raise UsageError(f"the stack rejects these settings: {exc}") from None
         start = time.perf_counter()
