@@ -123,6 +123,8 @@ def test_sequence_folder_appears_only_when_complete(tmp_path):
                                                                     "seg"]
     with pytest.raises(FileExistsError, match="seq"):
         SequenceWriter(tmp_path / "seq", _meta())
+    with pytest.raises(ValueError, match="png_compression must be an integer in \\[0, 9\\], got 12"):
+        SequenceWriter(tmp_path / "other", _meta(), png_compression=12)
     with pytest.raises(ValueError, match="boom"), SequenceWriter(tmp_path / "other", _meta()) as w:
         w.add(_records(1)[0])
         raise ValueError("boom")

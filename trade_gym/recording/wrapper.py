@@ -17,7 +17,8 @@ from trade_gym.config import CAMERA_RATE_HZ
 from trade_gym.faults import SensorFaults
 from trade_gym.provenance import git_commit
 from trade_gym.recording.format import FrameRecord, FrameTruth, VehicleTruth, json_safe
-from trade_gym.recording.writer import DEFAULT_PNG_COMPRESSION, SequenceMeta, SequenceWriter, instance_lookup, instance_map
+from trade_gym.recording.writer import (DEFAULT_PNG_COMPRESSION, SequenceMeta, SequenceWriter, check_png_compression,
+                                        instance_lookup, instance_map)
 
 EPISODE_DIR = "episode_{k:04d}"
 GENERATOR = "trade_gym.recording.RecordSequence"
@@ -39,6 +40,7 @@ class RecordSequence(gym.Wrapper):
         super().__init__(env)
         if not hasattr(env.unwrapped, "delivered_sensors"):
             raise TypeError(f"RecordSequence needs a TradeFollow-v0 env, got {type(env.unwrapped).__name__}")
+        check_png_compression(png_compression)
         self.root = Path(root)
         self.record_depth, self.record_seg = bool(depth), bool(seg)
         self.png_compression = png_compression

@@ -160,8 +160,7 @@ class SequenceWriter:
     """
 
     def __init__(self, path: Path | str, meta: SequenceMeta, png_compression: int = DEFAULT_PNG_COMPRESSION) -> None:
-        if isinstance(png_compression, bool) or png_compression not in range(MAX_PNG_COMPRESSION + 1):
-            raise ValueError(f"png_compression must be an integer in [0, {MAX_PNG_COMPRESSION}], got {png_compression!r}")
+        check_png_compression(png_compression)
         self.path = Path(path)
         if self.path.exists():
             raise FileExistsError(f"{self.path}: a sequence folder is there already; choose another")
@@ -254,6 +253,12 @@ class SequenceWriter:
         self._layers["seg"] = {"dir": SEG_DIR, "encoding": "png", "bits": 16, "quantity": "vehicle instance id",
                                "background": BACKGROUND_INSTANCE_ID}
         return relative
+
+
+def check_png_compression(level: object) -> None:
+    """ValueError unless `level` is an integer PNG compression level in [0, MAX_PNG_COMPRESSION]."""
+    if isinstance(level, bool) or not isinstance(level, int) or not 0 <= level <= MAX_PNG_COMPRESSION:
+        raise ValueError(f"png_compression must be an integer in [0, {MAX_PNG_COMPRESSION}], got {level!r}")
 
 
 def instance_lookup(body_ids: list[int]) -> np.ndarray:
