@@ -10,8 +10,11 @@ U(0, `xy_radius_m`) in a uniform direction; an altitude U(12, 40) m above `world
 included); a yaw U(-pi, pi); a mount pitch U(60, 90) deg. 128 x 128 px, 110 deg vertical FOV, TinyRenderer.
 Seeds: train 10_000.., held-out 20_000.., both training worlds (`trade_gym.bench.splits`); the benchmark
 evaluates development worlds 0..99 (disjoint).
-Output: one .npz per split: rgb (N, H, W, 3) uint8, depth_m (N, H, W) float16 (far_m where nothing was hit),
-scene (N,) str, seed (N,) int, pitch_deg, altitude_agl_m (N,) float32, far_m and render_s scalars.
+Output: one recorded sequence per world (docs/sequence_format.md, kind "views"), `<out-dir>/<split>/world_<seed>/`:
+frames/*.png RGB, depth/*.npz camera-frame z [m] as float32 (far_m where nothing was hit, meta.json
+layers.depth.no_hit_m), frames.jsonl with each view's time, pose and extra pitch_deg and altitude_agl_m, meta.json
+with the scene, the world seed and the render time. A split is written beside its old folder and replaces it
+when complete. `scripts/train_depth.py` reads it back.
 
 Usage: python scripts/make_depth_dataset.py [--train-worlds 300] [--heldout-worlds 25] [--views-per-world 8]
 """
@@ -19,18 +22,21 @@ Usage: python scripts/make_depth_dataset.py [--train-worlds 300] [--heldout-worl
 from __future__ import annotations
 
 import argparse
+import os
+import shutil
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import pybullet as p
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from trade.geometry import rotation_z  # noqa: E402
-from trade.single_image_depth import valid_depth_mask  # noqa: E402
+from trade.geometry import CameraIntrinsics, Pose, rotation_z  # noqa: E402
 from trade_gym.bench.splits import TRAINING, require_training_worlds  # noqa: E402
+from trade_gym.provenance import git_commit  # noqa: E402
+from trade_gym.recording import FrameRecord, SequenceMeta, SequenceWriter  # noqa: E402
 from trade_gym.sim.camera import Camera, CameraConfig  # noqa: E402
 from trade_gym.sim.world import World, build_world  # noqa: E402
 
@@ -39,6 +45,8 @@ TRAIN_SEED_BASE = TRAINING.first  # both data splits lie in the training split o
 HELDOUT_SEED_BASE = TRAINING.first + 10_000
 GRAVITY_MPS2 = 9.81
 DEFAULT_OUT_DIR = Path(__file__).resolve().parents[1] / "build" / "depth_dataset"
+WORLD_DIR = "world_{seed}"  # one sequence per world in a split's folder
+GENERATOR = "scripts/make_depth_dataset.py"
 
 
 @dataclass(frozen=True)
@@ -72,10 +80,13 @@ class ViewConfig:
 
 @dataclass(frozen=True)
 class View:
-    """One rendered sample: rgb (H, W, 3) uint8, depth_m (H, W) float32 camera z [m] and its pose draw."""
+    """One rendered sample: rgb (H, W, 3) uint8, depth_m (H, W) float32 camera z [m], the camera pose and the
+    world time it was rendered at [s], and its pose draw."""
 
     rgb: np.ndarray
     depth_m: np.ndarray
+    T_world_cam: Pose
+    t_s: float
     pitch_deg: float
     altitude_agl_m: float
 
@@ -109,37 +120,48 @@ def render_world_views(cid: int, scene: str, seed: int, count: int, cfg: ViewCon
         camera = Camera(cid, CameraConfig(width_px=cfg.size_px, height_px=cfg.size_px, fov_deg=cfg.fov_deg,
                                           pitch_deg=pitch, far_m=cfg.far_m))
         frame = camera.render(camera.pose(rotation_z(float(rng.uniform(-np.pi, np.pi))), (xy[0], xy[1], z)))
-        views.append(View(frame.rgb, frame.depth_m, pitch, agl))
+        views.append(View(frame.rgb, frame.depth_m, frame.T_world_cam, t_s, pitch, agl))
     return views
 
 
-def render_split(seed_base: int, worlds: int, views_per_world: int, cfg: ViewConfig) -> dict[str, np.ndarray]:
-    """Arrays of one split (see the module docstring), rendered in one DIRECT client that is closed after."""
+def write_world(path: Path, scene: str, seed: int, views: list[View], cfg: ViewConfig, render_s: float,
+                commit: str) -> Path:
+    """One world's views as a sequence folder of kind "views" (depth capped at far_m, float32)."""
+    meta = SequenceMeta(
+        intrinsics=CameraIntrinsics.from_fov(cfg.size_px, cfg.size_px, cfg.fov_deg), kind="views",
+        pose_source="gt", scene=scene, seeds={"world_seed": seed}, commit=commit,
+        source={"generator": GENERATOR, "view_config": asdict(cfg), "render_s": render_s},
+        depth_no_hit_m=cfg.far_m)
+    with SequenceWriter(path, meta) as writer:
+        for v in views:
+            writer.add(FrameRecord(t_s=v.t_s, rgb=v.rgb, T_world_cam=v.T_world_cam, T_world_cam_true=v.T_world_cam,
+                                   depth_m=np.minimum(v.depth_m, cfg.far_m).astype(np.float32),
+                                   extra={"pitch_deg": v.pitch_deg, "altitude_agl_m": v.altitude_agl_m}))
+    return path
+
+
+def render_split(out_dir: Path, seed_base: int, worlds: int, views_per_world: int, cfg: ViewConfig) -> list[Path]:
+    """Render one split into `out_dir` (one sequence per world, see the module docstring), in one DIRECT client
+    closed after. The split is written to a hidden folder beside `out_dir` that replaces it when complete."""
     require_training_worlds(range(seed_base, seed_base + worlds), "depth dataset")
+    tmp = out_dir.parent / f".{out_dir.name}.partial"
+    shutil.rmtree(tmp, ignore_errors=True)
+    commit = git_commit()
     cid = p.connect(p.DIRECT)
     try:
-        rows: dict[str, list] = {"rgb": [], "depth_m": [], "scene": [], "seed": [], "pitch_deg": [],
-                                 "altitude_agl_m": []}
         for k in range(worlds):
             scene, seed = SCENE_CYCLE[k % len(SCENE_CYCLE)], seed_base + k
-            for v in render_world_views(cid, scene, seed, views_per_world, cfg):
-                rows["rgb"].append(v.rgb)
-                rows["depth_m"].append(v.depth_m)
-                rows["scene"].append(scene)
-                rows["seed"].append(seed)
-                rows["pitch_deg"].append(v.pitch_deg)
-                rows["altitude_agl_m"].append(v.altitude_agl_m)
+            start = time.perf_counter()
+            views = render_world_views(cid, scene, seed, views_per_world, cfg)
+            write_world(tmp / WORLD_DIR.format(seed=seed), scene, seed, views, cfg, time.perf_counter() - start, commit)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     finally:
         p.disconnect(physicsClientId=cid)
-    return {
-        "rgb": np.stack(rows["rgb"]).astype(np.uint8),
-        "depth_m": np.minimum(np.stack(rows["depth_m"]), cfg.far_m).astype(np.float16),
-        "scene": np.array(rows["scene"]),
-        "seed": np.array(rows["seed"], dtype=np.int64),
-        "pitch_deg": np.array(rows["pitch_deg"], dtype=np.float32),
-        "altitude_agl_m": np.array(rows["altitude_agl_m"], dtype=np.float32),
-        "far_m": np.float32(cfg.far_m),
-    }
+    shutil.rmtree(out_dir, ignore_errors=True)
+    os.replace(tmp, out_dir)
+    return sorted(out_dir.glob(WORLD_DIR.format(seed="*")))
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -154,13 +176,10 @@ def main(argv: list[str] | None = None) -> None:
     for name, base, worlds in (("train", TRAIN_SEED_BASE, args.train_worlds),
                                ("heldout", HELDOUT_SEED_BASE, args.heldout_worlds)):
         start = time.perf_counter()
-        data = render_split(base, worlds, args.views_per_world, cfg)
-        data["render_s"] = np.float32(time.perf_counter() - start)  # worlds built + views rendered [s]
-        path = args.out_dir / f"{name}.npz"
-        np.savez_compressed(path, **data)
-        sky = 1.0 - float(np.mean(valid_depth_mask(data["depth_m"], cfg.far_m)))
-        print(f"{name}: {len(data['rgb'])} frames from {worlds} worlds (seeds {base}..{base + worlds - 1}) in "
-              f"{float(data['render_s']):.1f} s, sky fraction {sky:.3f} -> {path}", flush=True)
+        split = render_split(args.out_dir / name, base, worlds, args.views_per_world, cfg)
+        elapsed = time.perf_counter() - start
+        print(f"{name}: {worlds * args.views_per_world} frames from {len(split)} worlds (seeds {base}.."
+              f"{base + worlds - 1}) in {elapsed:.1f} s -> {args.out_dir / name}", flush=True)
 
 
 if __name__ == "__main__":

@@ -25,6 +25,8 @@ from trade.single_image_depth import (  # noqa: E402
     DEFAULT_INPUT_SIZE_PX, DEFAULT_MODEL, SingleImageDepth, depth_metrics_after_alignment, to_network_input,
     valid_depth_mask,
 )
+from trade_gym.bench.splits import require_training_worlds  # noqa: E402
+from trade_gym.recording.reader import open_sequence  # noqa: E402
 
 SEED = 1234
 # torch intra-op threads. 1 by default: measured with another job holding one of the 2 cores, 2 threads ran a
@@ -115,8 +117,33 @@ def augment(rgb: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.n
 
 
 def load_split(path: Path) -> dict[str, np.ndarray]:
-    with np.load(path) as z:
-        return {k: z[k] for k in z.files}
+    """A split written by make_depth_dataset.py: every sequence folder in `path` (docs/sequence_format.md, each
+    with a depth layer), stacked: rgb (N, H, W, 3) uint8, depth_m (N, H, W) float32 [m], scene (N,) str, seed
+    (N,) int; far_m (the layers' no-hit depth, one for all) and render_s (summed) scalars. Training worlds only."""
+    folders = sorted(f for f in path.iterdir() if f.is_dir() and not f.name.startswith(".")) if path.is_dir() else []
+    if not folders:
+        raise SystemExit(f"{path}: no sequence folders (run scripts/make_depth_dataset.py)")
+    rows: dict[str, list] = {"rgb": [], "depth_m": [], "scene": [], "seed": []}
+    far, render_s = set(), 0.0
+    for folder in folders:
+        sequence = open_sequence(folder)
+        seed = sequence.meta["seeds"]["world_seed"]
+        require_training_worlds([seed], "depth training")
+        far.add(sequence.meta["layers"]["depth"]["no_hit_m"])
+        render_s += float(sequence.meta["source"].get("render_s", 0.0))
+        for frame in sequence:
+            rows["rgb"].append(sequence.rgb(frame))
+            depth = sequence.depth_m(frame)
+            if depth is None:
+                raise SystemExit(f"{folder}: frame {frame.index} has no depth layer")
+            rows["depth_m"].append(depth)
+            rows["scene"].append(sequence.meta["scene"])
+            rows["seed"].append(seed)
+    if len(far) != 1:
+        raise SystemExit(f"{path}: the sequences disagree on the no-hit depth (layers.depth.no_hit_m: {sorted(far)})")
+    return {"rgb": np.stack(rows["rgb"]), "depth_m": np.stack(rows["depth_m"]), "scene": np.array(rows["scene"]),
+            "seed": np.array(rows["seed"], dtype=np.int64), "far_m": np.float32(far.pop()),
+            "render_s": np.float32(render_s)}
 
 
 def targets(depth_m: np.ndarray, far_m: float) -> tuple[torch.Tensor, torch.Tensor]:
@@ -277,7 +304,7 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
     torch.manual_seed(SEED)
     torch.set_num_threads(args.threads)
-    train_data, heldout = load_split(args.data_dir / "train.npz"), load_split(args.data_dir / "heldout.npz")
+    train_data, heldout = load_split(args.data_dir / "train"), load_split(args.data_dir / "heldout")
     net = DepthNet()
     params = sum(p.numel() for p in net.parameters())
     print(f"{len(train_data['rgb'])} train / {len(heldout['rgb'])} held-out frames, {params} parameters", flush=True)

@@ -3,7 +3,7 @@
 `import trade_gym` registers `TradeFollow-v0`.
 """
 
-from trade_gym.sim.quiet_import import import_pybullet_quietly
+from trade_gym.quiet_import import import_pybullet_quietly
 
 import_pybullet_quietly()  # before any module of the package imports pybullet: its banner is not ours to print
 

@@ -22,6 +22,7 @@ from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.ground_truth import GroundTruth, VehicleBox, box_corners, compute_ground_truth
 from trade_gym.latency import EstimateDelay
+from trade_gym.metrics import on_decoy
 from trade_gym.observation import build_observation, observation_space
 from trade_gym.perception.base import PerceptionOutput, SensorFilter, SensorFrame
 from trade_gym.perception.factory import make_perception
@@ -153,6 +154,9 @@ class TradeFollowEnv(gym.Env):
         self.perception = make_perception(self.config, self.camera.intrinsics, self._true_camera_pose)
         self._last_frame: CameraFrame | None = None
         self._last_truth: GroundTruth | None = None
+        self._last_sensors: SensorFrame | None = None
+        self._init_box: np.ndarray | None = None
+        self._T_world_cam_true: Pose | None = None
         self._last_estimate = PerceptionOutput.missing()
         self._estimate_delay: EstimateDelay | None = None
         self._estimate_age_s = 0.0
@@ -189,12 +193,13 @@ class TradeFollowEnv(gym.Env):
         sensors, truth = self._sense()
         sensors = self._filter_sensors(sensors, truth)
         init_box = self._perturbed_init_box(truth.target_bbox, rng)
+        self._init_box = init_box
         start_s = time.perf_counter()
         estimate = self.perception.reset(sensors, init_box, truth, rng)
         compute_s = time.perf_counter() - start_s
         self._estimate_delay = None if self.config.perception_latency == "none" else EstimateDelay(self._t_s)
         estimate = self._held_estimate(estimate, compute_s)
-        self._last_estimate, self._last_truth = estimate, truth
+        self._last_estimate, self._last_truth, self._last_sensors = estimate, truth, sensors
         obs = self._observe(estimate, sensors)
         info = self._info(truth, estimate, crashed=False, terms=None)
         return obs, info
@@ -227,7 +232,7 @@ class TradeFollowEnv(gym.Env):
         )
         terminated = crashed or self._time_target_hidden_s >= self.config.lost_timeout_s
         truncated = self._steps >= self.config.max_episode_steps and not terminated
-        self._last_estimate, self._last_truth = estimate, truth
+        self._last_estimate, self._last_truth, self._last_sensors = estimate, truth, sensors
         obs = self._observe(estimate, sensors)
         info = self._info(truth, estimate, crashed=crashed, terms=terms)
         return obs, reward, terminated, truncated, info
@@ -254,6 +259,32 @@ class TradeFollowEnv(gym.Env):
         """Install (None: remove) a transform of the sensors between the simulator and perception; it
         applies from the next reset or step (see `SensorFilter`; `trade_gym.faults` uses it)."""
         self._sensor_filter = sensor_filter
+
+    # ------------------------------------------------ this frame, for recorders
+    @property
+    def delivered_sensors(self) -> SensorFrame | None:
+        """What perception received at the current frame (after any sensor filter); None before reset."""
+        return self._last_sensors
+
+    @property
+    def ground_truth(self) -> GroundTruth | None:
+        """The current frame's ground truth (as scored; a fault wrapper may lower the visible fraction in info)."""
+        return self._last_truth
+
+    @property
+    def camera_frame(self) -> CameraFrame | None:
+        """The current frame as rendered (true image, depth and segmentation); None when nothing was rendered."""
+        return self._last_frame
+
+    @property
+    def true_camera_pose(self) -> Pose | None:
+        """T_world_cam the current frame was rendered and scored from (not the pose source's estimate)."""
+        return self._T_world_cam_true
+
+    @property
+    def initial_box(self) -> np.ndarray | None:
+        """(4,) x, y, w, h [px]: the box perception was initialised with at the last reset (perturbed)."""
+        return self._init_box
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickling keeps the configuration and the random generator (so `reset()` without a seed
@@ -408,7 +439,6 @@ class TradeFollowEnv(gym.Env):
         est_box = estimate.bbox.tolist()  # plain floats: scalar IoU on lists beats numpy on 4-vectors
         est_iou = iou(truth.target_bbox.tolist(), est_box)
         decoys_in_view = [tuple(d) for d in truth.decoy_bboxes.tolist() if d[0] == d[0]]  # k <= D, usually <= 2
-        best_decoy = max((iou(d, est_box) for d in decoys_in_view), default=0.0)
         drone = self._state.position_m
         info: dict[str, Any] = {
             "t_s": self._t_s,
@@ -418,7 +448,7 @@ class TradeFollowEnv(gym.Env):
             "iou": est_iou,
             "target_visible": truth.target_visible_fraction >= self.config.visible_fraction_threshold,
             "target_visible_fraction": truth.target_visible_fraction,
-            "on_decoy": bool(best_decoy > est_iou and best_decoy > 0.0),
+            "on_decoy": on_decoy(est_box, est_iou, decoys_in_view),
             "target_depth_gt": _depth_or_none(truth.target_depth_m),
             "target_depth_est": _depth_or_none(estimate.target_depth_m),
             "ground_depth_gt": _depth_or_none(truth.ground_depth_m),

@@ -157,6 +157,11 @@ class SensorFaults(gym.Wrapper):
         """What perception received at the current frame (the faulty image, e.g. to draw it)."""
         return self._delivered
 
+    @property
+    def start_frames(self) -> tuple[int, ...]:
+        """Each fault's start frame this episode (the schedule's, plus the drawn jitter)."""
+        return self._starts
+
     def active(self, frame: int | None = None) -> tuple[Fault, ...]:
         """The faults active at `frame` (default: the current frame) this episode."""
         return tuple(f for _, f in self._active_items(frame))

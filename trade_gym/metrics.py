@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from trade.types import iou
 from trade_gym.config import CAMERA_RATE_HZ
 
 Info = dict[str, Any]
@@ -32,6 +33,13 @@ METRIC_NAMES = (
     "target_depth_rmse_m", "target_depth_frames", "mean_horizontal_error_m", "crashed",
     "ground_depth_bias_m", "initial_iou",
 )
+
+
+def on_decoy(est_bbox: Sequence[float], est_iou: float, decoy_bboxes: Sequence[Sequence[float]]) -> bool:
+    """Whether the estimated box (x, y, w, h) [px] overlaps some decoy's box in view more than the target's
+    (its IoU with the target: `est_iou`); the per-frame `info["on_decoy"]`."""
+    best = max((iou(d, est_bbox) for d in decoy_bboxes), default=0.0)
+    return bool(best > est_iou and best > 0.0)
 
 
 def _column(infos: Sequence[Info], key: str, dtype: type = np.float64) -> np.ndarray:

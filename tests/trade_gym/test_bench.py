@@ -170,7 +170,7 @@ def test_tolerance_fails_only_degradations_beyond_margin():
 
 
 def test_run_spec_exception_recorded_as_one_line_error(monkeypatch):
-    def broken(spec):
+    def broken(spec, **kwargs):  # fly(spec, record_root=...)
         raise RuntimeError("the target is not in view at reset")
 
     monkeypatch.setattr(runner, "fly", broken)

@@ -116,11 +116,12 @@ def test_oracle_noise_fit_defaults_to_training_worlds_and_refuses_evaluation_one
     assert exit_info.value.code == 2 and f"world seed {EVALUATION.first}" in capsys.readouterr().err
 
 
-def test_depth_dataset_draws_training_worlds_and_refuses_evaluation_ones():
+def test_depth_dataset_draws_training_worlds_and_refuses_evaluation_ones(tmp_path):
     dataset = _load_script("scripts/make_depth_dataset.py")
     assert dataset.TRAIN_SEED_BASE in TRAINING and dataset.HELDOUT_SEED_BASE in TRAINING
     with pytest.raises(EvaluationWorldError):
-        dataset.render_split(EVALUATION.first, 2, 1, dataset.ViewConfig())
+        dataset.render_split(tmp_path / "train", EVALUATION.first, 2, 1, dataset.ViewConfig())
+    assert list(tmp_path.iterdir()) == []  # refused before anything was written
 
 
 def test_unseen_suite_flies_each_evaluation_world_once_per_configuration():

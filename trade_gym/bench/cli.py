@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -18,7 +19,7 @@ from trade_gym.bench.executors import (BACKENDS, DEFAULT_RAY_ADDRESS, RAY_LOCAL,
 from trade_gym.bench.policies import POLICY_NAMES, available_policies, learned_unavailable_reason
 from trade_gym.bench.results import (SERIES_FILE, build_document, collect_meta, load_results, load_schema,
                                      to_json_safe, write_json, write_series)
-from trade_gym.bench.runner import RunResult, run_all
+from trade_gym.bench.runner import RunResult, run_all, run_spec
 from trade_gym.bench.splits import EVALUATION
 from trade_gym.bench.suites import (BOOL_SWITCHES, EVALUATION_SUITES, SUITE_JOBS, SUITES, RunSpec, Selection,
                                     expand_suite)
@@ -69,6 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--ray-address", metavar="ADDR", help="with --backend ray: auto (default: the cluster this "
                    "machine joined with `ray start`), local (start a one-node cluster) or ray://HOST:PORT")
     p.add_argument("--out", type=Path, help="output folder (created; its parent must exist)")
+    p.add_argument("--record", type=Path, metavar="DIR", help="also write every run as a recorded sequence, "
+                   "DIR/<run id>/episode_0000/ (docs/sequence_format.md; replay with trade-replay); the folder is "
+                   "created, no run's folder may exist yet")
     p.add_argument("--video", action="store_true", help="also write a video of the first run (flown again "
                    "with rendering on; mp4, or GIF without an mp4 encoder)")
     p.add_argument("--list", action="store_true", help="print the runs and exit without running them")
@@ -188,6 +192,19 @@ def _check_paths(args: argparse.Namespace, selection: Selection) -> None:
         raise UsageError(f"--check-reference {args.check_reference}: no such file")
 
 
+def _check_record(args: argparse.Namespace, specs: Sequence[RunSpec]) -> None:
+    """--record DIR: its parent exists, and no run's sequence folder is there yet (so nothing is overwritten)."""
+    root: Path | None = args.record
+    if root is None:
+        return
+    if not root.parent.is_dir():
+        raise UsageError(f"--record {root}: parent folder {root.parent} does not exist")
+    if root.exists() and not root.is_dir():
+        raise UsageError(f"--record {root} exists and is not a folder")
+    if taken := next((root / s.run_id for s in specs if (root / s.run_id).exists()), None):
+        raise UsageError(f"--record {root}: {taken} exists already; record into another folder")
+
+
 def _check_backend(args: argparse.Namespace) -> None:
     """--ray-address only with --backend ray (resolved to its default there); --jobs only where it applies."""
     if args.backend != "ray":
@@ -206,10 +223,11 @@ def _check_backend(args: argparse.Namespace) -> None:
 
 def _executor(args: argparse.Namespace) -> Executor:
     """The backend's executor; a Ray cluster is connected (or started) here, before any episode runs."""
+    task = run_spec if args.record is None else functools.partial(run_spec, record_root=args.record.resolve())
     if args.backend == "local":
-        return LocalExecutor(args.jobs or SUITE_JOBS.get(args.suite or "", DEFAULT_CUSTOM_JOBS))
+        return LocalExecutor(args.jobs or SUITE_JOBS.get(args.suite or "", DEFAULT_CUSTOM_JOBS), task=task)
     try:
-        executor = RayExecutor(args.ray_address, num_cpus=args.jobs)
+        executor = RayExecutor(args.ray_address, num_cpus=args.jobs, task=task)
         executor.connect()
     except BackendUnavailable as exc:
         raise UsageError(str(exc)) from None
@@ -307,6 +325,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print("\n".join(s.run_id + f" ({s.steps} steps, {s.camera_size} px)" for s in specs))
             return 0
         _check_paths(args, selection)
+        _check_record(args, specs)
         executor = _executor(args)
     except UsageError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
@@ -336,6 +355,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         for line in problems:
             print(f"  {line}", file=sys.stderr)
         status = status or (EXIT_FAILED if problems else 0)
+    if args.record is not None:
+        print(f"sequences of the runs recorded under {args.record} (replay: trade-replay SEQUENCE --out DIR)",
+              file=sys.stderr)
     print(f"{len(results)} runs in {wall_s:.1f} s -> {args.out / 'results.md'}")
     return status
 

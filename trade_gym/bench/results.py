@@ -9,7 +9,6 @@ import json
 import math
 import os
 import platform
-import subprocess
 from collections.abc import Sequence
 from dataclasses import asdict, fields
 from datetime import datetime, timezone
@@ -22,37 +21,14 @@ import numpy as np
 from trade_gym.bench.runner import RunResult, RunSeries, RunTiming
 from trade_gym.bench.suites import RunSpec
 from trade_gym.bench.summary import spec_record
+from trade_gym.provenance import cpu_model, git_commit  # noqa: F401  (git_commit: re-exported)
 
 SCHEMA_VERSION = 1
 SCHEMA_FILE = "results.schema.json"
 PACKAGES = ("numpy", "pybullet", "gymnasium", "opencv-python-headless", "onnxruntime", "stable-baselines3",
             "filterpy", "matplotlib", "ray", "trade-gym")
 RENDERER = "TinyRenderer"  # pybullet DIRECT mode's software renderer (the env's default)
-GIT_TIMEOUT_S = 5.0
 SERIES_FILE = "series.npz"  # every run's per-frame series, keyed "<run_id>/<field>" (see RunSeries)
-
-
-def git_commit(cwd: Path | None = None) -> str:
-    """Short hash of HEAD (with '+dirty' when the tree has changes); 'unknown' outside a repository."""
-    def git(*args: str) -> str:
-        return subprocess.run(["git", *args], capture_output=True, text=True, check=True, cwd=cwd,
-                              timeout=GIT_TIMEOUT_S).stdout.strip()
-
-    try:
-        commit = git("rev-parse", "--short", "HEAD")
-        return commit + ("+dirty" if git("status", "--porcelain", "--untracked-files=no") else "")
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def package_versions() -> dict[str, str]:

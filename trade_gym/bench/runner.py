@@ -11,17 +11,21 @@ import time
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
+import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
+from trade_gym.quiet_import import import_pybullet_quietly
 
+import_pybullet_quietly()
 
-from trade_gym import metrics
-from trade_gym.bench.policies import make_policy
-from trade_gym.bench.suites import RunSpec
-from trade_gym.env import TradeFollowEnv
+from trade_gym import metrics  # noqa: E402  (after the quiet pybullet import)
+from trade_gym.bench.policies import make_policy  # noqa: E402
+from trade_gym.bench.suites import RunSpec  # noqa: E402
+from trade_gym.env import TradeFollowEnv  # noqa: E402
 
 if TYPE_CHECKING:
     from trade_gym.bench.executors import Executor
@@ -103,14 +107,17 @@ def error_line(exc: BaseException) -> str:
 
 
 def fly(spec: RunSpec, on_frame: Callable[[TradeFollowEnv], None] | None = None,
-        render: bool = False) -> tuple[list[dict], RunTiming]:
-    """Fly one episode of `spec`; `on_frame(env)` after reset and every step (e.g. to record video)."""
+        render: bool = False, record_root: Path | None = None) -> tuple[list[dict], RunTiming]:
+    """Fly one episode of `spec`; `on_frame(env)` after reset and every step (e.g. to record video). With
+    `record_root` the episode is also written as a sequence to `record_root/<run id>/episode_0000/`."""
     start = time.perf_counter()
     kwargs = spec.env_kwargs() | ({"render_mode": "rgb_array"} if render else {})
-    env = TradeFollowEnv(**kwargs)
+    base = env = TradeFollowEnv(**kwargs)
     infos: list[dict] = []
     try:
-        policy = make_policy(spec.policy, spec.seed, env.config.camera_pitch_deg)
+        if record_root is not None:
+            env = _recording(base, record_root / spec.run_id)
+        policy = make_policy(spec.policy, spec.seed, base.config.camera_pitch_deg)
         reset_start = time.perf_counter()
         obs, _ = env.reset(seed=spec.seed)
         loop_start = time.perf_counter()
@@ -133,11 +140,18 @@ def fly(spec: RunSpec, on_frame: Callable[[TradeFollowEnv], None] | None = None,
     return infos, timing
 
 
-def run_spec(spec: RunSpec) -> RunResult:
-    """Fly and score one run; an exception is recorded in `error` rather than raised."""
+def _recording(env: TradeFollowEnv, root: Path) -> gym.Wrapper:
+    from trade_gym.recording import RecordSequence  # imports the stack's settings (OpenCV, filterpy)
+
+    return RecordSequence(env, root)
+
+
+def run_spec(spec: RunSpec, record_root: Path | None = None) -> RunResult:
+    """Fly and score one run (recording it under `record_root` when given, see `fly`); an exception is recorded
+    in `error` rather than raised."""
     start = time.perf_counter()
     try:
-        infos, timing = fly(spec)
+        infos, timing = fly(spec, record_root=record_root)
     except Exception as exc:  # noqa: BLE001 - one failed run must not end a long benchmark
         last = traceback.extract_tb(exc.__traceback__)[-1]
         return failed_result(spec, f"{error_line(exc)} ({last.filename}:{last.lineno})", time.perf_counter() - start)

@@ -34,6 +34,13 @@ FROZEN_MIN_TURN_RAD = 1e-3
 # With trajectory guidance, a frame is not tracked while the trajectory model puts the target this far (as a
 # fraction of the image side) outside the image, or behind the camera: no peak in it can be the target.
 OUT_OF_VIEW_MARGIN_FRACTION = 0.25
+# The stack's random generator is its own, seeded at reset by one draw in [0, STACK_SEED_HIGH) from the env's
+# generator: its draws (RANSAC samples) never interleave with the IMU's and the pose source's, so a replay of the
+# recorded sensors with the recorded seed gives the closed loop's estimates exactly.
+STACK_SEED_HIGH = 2**63
+# The env switches that make up the stack's settings (`pipeline_config`); `perception` picks trade or dcf.
+STACK_SWITCHES = ("temporal_fusion", "ground_mask", "single_image_depth", "depth_only_ransac",
+                  "trajectory_guidance", "snap_init_box")
 
 
 def pipeline_config(config: EnvConfig) -> PipelineConfig:
@@ -81,14 +88,23 @@ class TradePerception:
         self.last: Estimate | None = None
         self._T_world_cam = None
         self._tracked_frame: SensorFrame | None = None  # the last frame the pipeline tracked
+        self.rng_seed: int | None = None  # the seed of the stack's own generator this episode
 
     def reset(self, sensors: SensorFrame, init_box: FloatArray, truth: GroundTruth,
               rng: np.random.Generator) -> PerceptionOutput:
+        """Start an episode; the stack's generator is seeded by one draw from `rng` (the env's)."""
+        return self.reset_seeded(sensors, init_box, truth, int(rng.integers(STACK_SEED_HIGH)))
+
+    def reset_seeded(self, sensors: SensorFrame, init_box: FloatArray, truth: GroundTruth,
+                     rng_seed: int) -> PerceptionOutput:
+        """Start an episode with the stack's generator seeded by `rng_seed` (a replay passes the recorded one)."""
         if sensors.rgb is None:
             raise RuntimeError("the trade perception needs rendered frames")
         if not np.all(np.isfinite(init_box)):
             raise RuntimeError("the target is not in view at reset; cannot initialise the tracker")
-        self.pipeline = TradePipeline(self.pipeline_config, self.intrinsics, rng, self.depth_model)
+        self.rng_seed = int(rng_seed)
+        self.pipeline = TradePipeline(self.pipeline_config, self.intrinsics, np.random.default_rng(self.rng_seed),
+                                      self.depth_model)
         self.last = self.pipeline.initialise(sensors.rgb, BBox.from_array(init_box), sensors.T_world_cam,
                                              sensors.t_s)
         self._T_world_cam = sensors.T_world_cam
@@ -145,11 +161,16 @@ class TradePerception:
 
     def _ground_depth(self, est: Estimate, truth: GroundTruth, sensors: SensorFrame) -> float:
         """Depth of the estimated ground plane along the ground-truth box centre's ray (the paper's
-        Table 1 quantity: plane quality independent of tracking errors). Depth-only mode: the aligned
-        depth map read at that pixel (which shows the target's top, so it is short by about its height)."""
-        if not np.all(np.isfinite(truth.target_bbox)):
+        Table 1 quantity: plane quality independent of tracking errors)."""
+        return self.ground_depth_at(est, sensors, truth.target_bbox)
+
+    def ground_depth_at(self, est: Estimate, sensors: SensorFrame, box: FloatArray) -> float:
+        """Depth [m] of `est`'s ground plane along the ray of the centre of `box` (x, y, w, h [px]) from the pose
+        of `sensors`; NaN without a box or a plane. Depth-only mode: the aligned depth map read at that pixel
+        (which shows the target's top, so it is short by about its height)."""
+        if not np.all(np.isfinite(box)):
             return float("nan")
-        centre = truth.target_bbox[:2] + truth.target_bbox[2:] / 2.0
+        centre = box[:2] + box[2:] / 2.0
         if est.depth_map_m is not None:
             return float(sample_map(est.depth_map_m, centre.reshape(1, 2))[0])
         if est.plane is None:

@@ -1,4 +1,6 @@
-"""pybullet's C module prints a build-time banner on stderr when it is imported; import it silently."""
+"""Importing pybullet without its build-time banner, which its C import prints on stderr and which would break
+the command-line tools' one-line errors and progress lines.
+"""
 
 from __future__ import annotations
 
@@ -7,8 +9,8 @@ import sys
 
 
 def import_pybullet_quietly() -> None:
-    """Import pybullet with file descriptor 2 pointed at /dev/null (a no-op once it is imported), so making
-    and stepping the env prints nothing and the CLIs' one-line errors stay one line."""
+    """Import pybullet with file descriptor 2 pointed at /dev/null: its C import prints a build-time
+    banner on stderr, which would break the CLI's one-line errors and its progress line."""
     if "pybullet" in sys.modules:
         return
     sys.stderr.flush()

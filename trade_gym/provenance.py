@@ -1,0 +1,36 @@
+"""Where a number or a file came from: the repository's commit and the machine's CPU.
+
+Shared by trade-bench's results.json, its regression reference and recorded sequences' meta.json.
+"""
+
+from __future__ import annotations
+
+import platform
+import subprocess
+from pathlib import Path
+
+GIT_TIMEOUT_S = 5.0
+PACKAGE_DIR = Path(__file__).resolve().parent  # git runs here: the repository this code was loaded from
+
+
+def git_commit(cwd: Path | None = PACKAGE_DIR) -> str:
+    """Short hash of HEAD (with '+dirty' when the tree has changes); 'unknown' outside a repository."""
+    def git(*args: str) -> str:
+        return subprocess.run(["git", *args], capture_output=True, text=True, check=True, cwd=cwd,
+                              timeout=GIT_TIMEOUT_S).stdout.strip()
+
+    try:
+        commit = git("rev-parse", "--short", "HEAD")
+        return commit + ("+dirty" if git("status", "--porcelain", "--untracked-files=no") else "")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
