@@ -28,7 +28,9 @@ SECTIONS = (
      "The paper's protocol on the 20 evaluation worlds per scene, which no parameter, threshold or test was "
      "chosen on (`trade_gym.bench.splits`): one run per world, first frame shifted within 10 frames, initial "
      "box perturbed within 5 px and snapped, 450 frames at 256 px, flown in closed loop by the scripted "
-     "follower. Then Table 1's ablation rows on the first 5 evaluation worlds.", ("unseen",)),
+     "follower. Then Table 1's ablation rows on the first 5 evaluation worlds (the `unseen_table1` group of "
+     "an unseen run, rendered with `trade-bench --report DIR --tables unseen_table1`; its commit may be an "
+     "earlier one than the main table's: each names its own).", ("unseen", "unseen_table1")),
     ("Development world (the paper's reproduction)",
      "The paper's tables on one development world per scene (`world_seed=0`, the world the stack's parameters "
      "were tuned on), 5 runs per cell for depth and 10 for tracking, each with its own start shift, box "
