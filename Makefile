@@ -11,13 +11,14 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	# torch first from the local CPU wheel, so stable-baselines3 does not pull a CUDA build
 	$(PY) -m pip install --quiet "torch==2.13.0"
-	$(PY) -m pip install --quiet -e ".[test,ray]"
+	$(PY) -m pip install --quiet -e ".[test,ray,video,lint]"
 	touch $(STAMP)
 
 demo: $(STAMP)
 	$(VENV)/bin/trade-bench --suite quick --out demo_out --video
 
 test: $(STAMP)
+	$(VENV)/bin/ruff check .
 	$(PY) -m pytest -q -p no:cacheprovider
 
 test-slow: $(STAMP)

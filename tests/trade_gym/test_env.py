@@ -230,3 +230,19 @@ def test_check_env_passes_for_the_image_perceptions_with_missing_depths_as_none(
         assert info["ground_depth_est"] is None or math.isfinite(info["ground_depth_est"])
     finally:
         env.close()
+
+
+def test_gymnasium_record_video_writes_an_episode(tmp_path):
+    """gymnasium's RecordVideo (MoviePy, the `video` extra) records the env's rgb_array frames as an mp4."""
+    from gymnasium.wrappers import RecordVideo
+
+    env = RecordVideo(gym.make("TradeFollow-v0", perception="oracle", render_mode="rgb_array", **SMALL),
+                      str(tmp_path / "videos"), episode_trigger=lambda episode: True, disable_logger=True)
+    try:
+        env.reset(seed=0)
+        for _ in range(10):
+            env.step(env.action_space.sample())
+    finally:
+        env.close()
+    videos = sorted((tmp_path / "videos").glob("*.mp4"))
+    assert len(videos) == 1 and videos[0].stat().st_size > 0, list((tmp_path / "videos").iterdir())
