@@ -24,6 +24,7 @@ from trade_gym.bench.splits import EVALUATION
 from trade_gym.bench.suites import (BOOL_SWITCHES, EVALUATION_SUITES, SUITE_JOBS, SUITES, RunSpec, Selection,
                                     expand_suite)
 from trade_gym.bench.summary import summarise
+from trade_gym.cli_args import OneLineParser, UsageError
 from trade_gym.config import PERCEPTION_MODES, POSE_SOURCES, SCENE_NAMES, EnvConfig
 
 PROG = "trade-bench"
@@ -34,17 +35,8 @@ DEFAULT_CUSTOM_JOBS = 1
 MIN_STEPS, MIN_CAMERA_PX, MIN_JOBS = 1, 16, 1  # EnvConfig's camera_size floor is 16 px
 
 
-class UsageError(Exception):
-    """A bad argument: reported as one line, exit status 2, before any episode runs."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one line, no usage block
-        raise UsageError(message)
-
-
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog=PROG, description="Score follower policies and perception variants on TradeFollow-v0. "
+    p = OneLineParser(prog=PROG, description="Score follower policies and perception variants on TradeFollow-v0. "
                 "With --suite, --scenes/--policies/--perceptions/--pose-sources/--ablation/--tables filter the "
                 "suite and --seeds/--steps/--camera-size override it; without, they define one grid.")
     p.add_argument("--suite", choices=tuple(SUITES), help="quick (make demo, ~1-3 min), paper (the paper's "

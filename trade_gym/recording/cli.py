@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from trade_gym.bench.runner import trajectory_sha256  # first: imports pybullet without its banner
+from trade_gym.cli_args import OneLineParser, UsageError
 from trade_gym.perception.trade_stack import STACK_SWITCHES, pipeline_config
 from trade_gym.provenance import cpu_model, git_commit
 from trade_gym.recording.format import SequenceError, json_safe
@@ -34,17 +35,8 @@ SWITCH_VALUES = {"true": True, "on": True, "1": True, "false": False, "off": Fal
 PARTIAL_SUFFIX = ".partial"
 
 
-class UsageError(Exception):
-    """A bad argument or sequence: one line, exit status 2, nothing written."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one line, no usage block
-        raise UsageError(message)
-
-
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog=PROG, description="Replay the TRADE stack open-loop over a recorded sequence "
+    p = OneLineParser(prog=PROG, description="Replay the TRADE stack open-loop over a recorded sequence "
                 "(docs/sequence_format.md). By default the stack runs as recorded (meta.json: mode, switches and "
                 "the seed of its own generator), which reproduces the recorded run's estimates exactly.")
     p.add_argument("sequence", type=Path, help="sequence folder (with meta.json and frames.jsonl)")
