@@ -275,6 +275,11 @@ def test_cli_report_with_tables_renders_only_those_groups_and_names_the_ones_the
     assert cli.main(["--report", str(tmp_path / "a"), "--tables", "table1", "--out", str(tmp_path / "c")]) == 2
     assert capsys.readouterr().err.strip() == (f"trade-bench: error: --tables table1: not in "
                                                f"{tmp_path / 'a' / 'results.json'} (its groups: follow, tracking)")
+    assert cli.main(["--report", str(tmp_path / "a"), "--scenes", "city", "--out", str(tmp_path / "d")]) == 2
+    assert capsys.readouterr().err.strip() == (f"trade-bench: error: --scenes city: not in "
+                                               f"{tmp_path / 'a' / 'results.json'} (its scenes: desert)")
+    assert cli.main(["--report", str(tmp_path / "a"), "--scenes", "desert", "--out", str(tmp_path / "e")]) == 0
+    assert json.loads((tmp_path / "e" / "results.json").read_text())["runs"] == doc["runs"]
 
 
 def test_latency_suite_sweeps_five_latencies_per_scene_and_follower_on_development_worlds():

@@ -45,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "on), latency (full TRADE, scripted and learned followers, every scene, fixed perception latency "
                    "0-400 ms, 30 runs, ~15 min), full (paper tables at full length plus all followers, hours)")
     p.add_argument("--tables", nargs="+", metavar="GROUP", help="groups of the suite to run (see --list); with "
-                   "--report, the groups of the earlier run to render")
+                   "--report, the groups of the earlier run to render (and --scenes its scenes)")
     p.add_argument("--scenes", nargs="+", choices=SCENE_NAMES)
     p.add_argument("--policies", nargs="+", metavar="POLICY", help=f"any of {', '.join(POLICY_NAMES)}")
     p.add_argument("--perceptions", nargs="+", choices=PERCEPTION_MODES)
@@ -296,6 +296,11 @@ def render_report(args: argparse.Namespace) -> int:
         if unknown := [t for t in args.tables if t not in present]:
             raise UsageError(f"--tables {' '.join(unknown)}: not in {source} (its groups: {', '.join(present)})")
         results = [r for r in results if r.spec.group in args.tables]
+    if args.scenes is not None:  # ... and only these scenes
+        present = sorted({r.spec.scene for r in results})
+        if unknown := [s for s in args.scenes if s not in present]:
+            raise UsageError(f"--scenes {' '.join(unknown)}: not in {source} (its scenes: {', '.join(present)})")
+        results = [r for r in results if r.spec.scene in args.scenes]
     args.out.mkdir(exist_ok=True)
     write_outputs(args, results, meta)
     print(f"{len(results)} runs of {source} -> {args.out / 'results.md'}")
