@@ -34,7 +34,9 @@ SECTIONS = (
     ("Development world (the paper's reproduction)",
      "The paper's tables on one development world per scene (`world_seed=0`, the world the stack's parameters "
      "were tuned on), 5 runs per cell for depth and 10 for tracking, each with its own start shift, box "
-     "perturbation, sensor noise and VIO drift.", ("paper/table1", "paper/table2", "paper/tracking")),
+     "perturbation, sensor noise and VIO drift. A table re-run for some scenes only is shown as two reports, "
+     "each rendered for its scenes (`trade-bench --report DIR --scenes ...`) with its own commit.",
+     ("paper/table1", "paper/table1_city", "paper/table2", "paper/tracking")),
     ("Perception latency (development world)",
      "Full TRADE with ground-truth pose on development world 0 of each scene, 450 frames at 256 px, flown by "
      "the scripted and the learned follower with a fixed perception latency (`perception_latency=\"fixed\"`): "
