@@ -22,7 +22,7 @@ from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.ground_truth import GroundTruth, VehicleBox, box_corners, compute_ground_truth
 from trade_gym.latency import EstimateDelay
-from trade_gym.metrics import on_decoy
+from trade_gym.metrics import depth_or_none, on_decoy
 from trade_gym.observation import build_observation, observation_space
 from trade_gym.perception.base import PerceptionOutput, SensorFilter, SensorFrame
 from trade_gym.perception.factory import make_perception
@@ -37,11 +37,6 @@ GRAVITY_MPS2 = 9.81
 ACTION_DIM = 4
 # Rays for the ground-depth truth reach this far beyond the drone's height [m].
 GROUND_RAY_RANGE_M = 1000.0
-
-
-def _depth_or_none(depth_m: float) -> float | None:
-    """A depth for `info`: None where it does not exist (NaN inside the env), as float NaN != NaN."""
-    return None if math.isnan(depth_m) else float(depth_m)
 
 
 class TradeFollowEnv(gym.Env):
@@ -449,10 +444,10 @@ class TradeFollowEnv(gym.Env):
             "target_visible": truth.target_visible_fraction >= self.config.visible_fraction_threshold,
             "target_visible_fraction": truth.target_visible_fraction,
             "on_decoy": on_decoy(est_box, est_iou, decoys_in_view),
-            "target_depth_gt": _depth_or_none(truth.target_depth_m),
-            "target_depth_est": _depth_or_none(estimate.target_depth_m),
-            "ground_depth_gt": _depth_or_none(truth.ground_depth_m),
-            "ground_depth_est": _depth_or_none(estimate.ground_depth_m),
+            "target_depth_gt": depth_or_none(truth.target_depth_m),
+            "target_depth_est": depth_or_none(estimate.target_depth_m),
+            "ground_depth_gt": depth_or_none(truth.ground_depth_m),
+            "ground_depth_est": depth_or_none(estimate.ground_depth_m),
             "est_valid": estimate.valid,
             "estimate_age_s": self._estimate_age_s,
             "crashed": crashed,

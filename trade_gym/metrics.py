@@ -7,6 +7,8 @@ Tracking scores (tracked fraction, success AUC, precision) count only frames wit
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Sequence
 from typing import Any
 
@@ -111,6 +113,11 @@ def longest_lost_streak_s(infos: Sequence[Info], frame_dt_s: float = FRAME_DT_S,
         return float("nan")
     tracked = _visible(infos) & (_column(infos, "iou") >= iou_threshold)
     return longest_run(~tracked) * frame_dt_s
+
+
+def depth_or_none(depth_m: float) -> float | None:
+    """A depth as `info` holds it: None where it does not exist (NaN in the stack), as float NaN != NaN."""
+    return None if math.isnan(depth_m) else float(depth_m)
 
 
 def decoy_switches(infos: Sequence[Info]) -> int:

@@ -18,7 +18,7 @@ from trade.planes import Plane
 from trade.types import ImuBatch, iou
 from trade_gym.config import CAMERA_RATE_HZ, EnvConfig
 from trade_gym.ground_truth import GroundTruth
-from trade_gym.metrics import episode_metrics, on_decoy
+from trade_gym.metrics import depth_or_none, episode_metrics, on_decoy
 from trade_gym.perception.base import PerceptionOutput, SensorFrame
 from trade_gym.perception.trade_stack import STACK_SWITCHES, TradePerception, pipeline_config
 from trade_gym.recording.format import META_FILE, FrameTruth, SequenceError, encode_box, encode_real, json_safe
@@ -190,10 +190,10 @@ def _info(frame: SequenceFrame, out: PerceptionOutput, threshold: float) -> dict
         "target_visible": truth.target_visible_fraction >= threshold,
         "target_visible_fraction": truth.target_visible_fraction,
         "on_decoy": on_decoy(est_box, est_iou, truth.decoy_bboxes_in_view()),
-        "target_depth_gt": truth.target_depth_m,
-        "target_depth_est": out.target_depth_m,
-        "ground_depth_gt": truth.ground_depth_m,
-        "ground_depth_est": out.ground_depth_m,
+        "target_depth_gt": depth_or_none(truth.target_depth_m),
+        "target_depth_est": depth_or_none(out.target_depth_m),
+        "ground_depth_gt": depth_or_none(truth.ground_depth_m),
+        "ground_depth_est": depth_or_none(out.ground_depth_m),
         "est_valid": out.valid,
         "crashed": truth.crashed,
         "drone_position_m": drone,
