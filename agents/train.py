@@ -42,16 +42,6 @@ class TrainConfig:
     # extra gym.make kwargs; the oracle's fitted first-fix delay is not EnvConfig's default (see there)
     env_kwargs: tuple[tuple[str, Any], ...] = (("perception", "oracle"),
                                                ("oracle_first_fix_delay_s", FITTED_FIRST_FIX_DELAY_S))
-    # Training reward (the env and its reward are unchanged): the env reward minus `distance_penalty_weight`
-    # x horizontal distance / follow height, and, unless `keep_env_shape_terms`, with the env's centering and
-    # altitude terms replaced by `height_hold_weight` x |height above target - its value at reset| / that
-    # value. Centering measures the target's offset in the image of a camera that tilts with the drone, so
-    # while accelerating it pays for standing off the target; the altitude term compares the height above
-    # the target's centre with the scene's height above ground, so it pays for climbing by half the target's
-    # height, and the policy cannot see which scene it is in.
-    distance_penalty_weight: float = 1.0
-    height_hold_weight: float = 0.5
-    keep_env_shape_terms: bool = False
     hidden_units: tuple[int, ...] = (64, 64)
     learning_rate: float = 1e-4
     n_steps_per_env: int = 4096  # PPO rollout length per env
@@ -97,9 +87,8 @@ class TrainConfig:
         for name in ("gamma", "gae_lambda"):
             if not 0.0 < getattr(self, name) <= 1.0:
                 raise ValueError(f"TrainConfig.{name} must be in (0, 1], got {getattr(self, name)!r}")
-        for name in ("distance_penalty_weight", "height_hold_weight", "ent_coef"):
-            if not np.isfinite(getattr(self, name)) or getattr(self, name) < 0:
-                raise ValueError(f"TrainConfig.{name} must be >= 0, got {getattr(self, name)!r}")
+        if not np.isfinite(self.ent_coef) or self.ent_coef < 0:
+            raise ValueError(f"TrainConfig.ent_coef must be >= 0, got {self.ent_coef!r}")
         if self.warm_start is not None and self.algo != "ppo":
             raise ValueError(f"TrainConfig.warm_start needs algo='ppo', got algo={self.algo!r}")
         if self.critic_warmup_steps < 0 or (self.warm_start is not None
@@ -123,9 +112,7 @@ def make_training_env(config: TrainConfig, rank: int, flat: bool = True) -> Call
 
     def build() -> gym.Env:
         # SB3 seeds worker `rank`'s first reset with seed + rank, which fixes its whole stream of draws
-        env = SceneRandomizedEnv(config.scenes, config.distance_penalty_weight, config.height_hold_weight,
-                                 config.keep_env_shape_terms,
-                                 episode_duration_s=config.episode_duration_s, **dict(config.env_kwargs))
+        env = SceneRandomizedEnv(config.scenes, episode_duration_s=config.episode_duration_s, **dict(config.env_kwargs))
         return Monitor(FlatObservation(ZeroYawAction(env))) if flat else env
 
     return build
@@ -267,10 +254,6 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=defaults.seed)
     parser.add_argument("--scenes", nargs="+", default=list(defaults.scenes), choices=SCENE_NAMES)
     parser.add_argument("--episode-duration-s", type=float, default=defaults.episode_duration_s)
-    parser.add_argument("--distance-penalty-weight", type=float, default=defaults.distance_penalty_weight)
-    parser.add_argument("--height-hold-weight", type=float, default=defaults.height_hold_weight)
-    parser.add_argument("--keep-env-shape-terms", action="store_true",
-                        help="train on the env's centering and altitude terms instead of distance and height hold")
     parser.add_argument("--env", type=_parse_env_kwarg, action="append", default=[], metavar="KEY=VALUE",
                         help="extra gym.make kwarg (repeatable), e.g. --env oracle_dropout_prob=0.1")
     parser.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
@@ -286,8 +269,6 @@ def main(argv: list[str] | None = None) -> None:
     config = TrainConfig(algo=args.algo, total_steps=args.steps, n_envs=args.n_envs, seed=args.seed,
                          scenes=tuple(args.scenes), episode_duration_s=args.episode_duration_s,
                          env_kwargs=tuple(sorted(env_kwargs.items())),
-                         distance_penalty_weight=args.distance_penalty_weight,
-                         height_hold_weight=args.height_hold_weight, keep_env_shape_terms=args.keep_env_shape_terms,
                          tensorboard_dir=args.tensorboard,
                          progress_bar=not args.no_progress, checkpoint_every_steps=args.checkpoint_every,
                          verbose=args.verbose, warm_start=clone,

@@ -7,7 +7,10 @@ an error naming the parameter and the value.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+
+from trade_gym.reward import RewardConfig
 
 PERCEPTION_MODES = ("trade", "dcf", "oracle")
 POSE_SOURCES = ("gt", "vio")
@@ -66,8 +69,14 @@ class EnvConfig:
     # compute time for that frame: not deterministic). perception_latency_ms only with "fixed" [ms].
     perception_latency: str = "none"
     perception_latency_ms: float | None = None
+    # The reward's weights (`trade_gym.reward`): a RewardConfig or a mapping of its fields.
+    reward: RewardConfig = field(default_factory=RewardConfig)
 
     def __post_init__(self) -> None:
+        if isinstance(self.reward, Mapping):
+            object.__setattr__(self, "reward", RewardConfig(**self.reward))
+        if not isinstance(self.reward, RewardConfig):
+            raise ValueError(f"reward must be a RewardConfig or a mapping of its fields, got {self.reward!r}")
         _check_choice("scene", self.scene, SCENE_NAMES)
         _check_choice("perception", self.perception, PERCEPTION_MODES)
         _check_choice("pose_source", self.pose_source, POSE_SOURCES)

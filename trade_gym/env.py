@@ -24,9 +24,9 @@ from trade_gym.ground_truth import GroundTruth, VehicleBox, box_corners, compute
 from trade_gym.latency import EstimateDelay
 from trade_gym.metrics import depth_or_none, on_decoy
 from trade_gym.observation import build_observation, observation_space
-from trade_gym.perception.base import PerceptionOutput, SensorFilter, SensorFrame
+from trade_gym.perception.base import FloatArray, PerceptionOutput, SensorFilter, SensorFrame
 from trade_gym.perception.factory import make_perception
-from trade_gym.reward import RewardConfig, compute_reward
+from trade_gym.reward import RewardInputs, compute_reward
 from trade_gym.sim.camera import Camera, CameraConfig, CameraFrame
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import make_pose_source
@@ -94,8 +94,13 @@ class TradeFollowEnv(gym.Env):
     `target_position_m`; `horizontal_distance_m`; `decoy_bboxes`; `reward_<term>`.
 
     ## Rewards
-    Sum of `visible`, `centering`, `altitude`, `effort` and `crash` (see `trade_gym.reward`); each
-    term is in `info["reward_<term>"]`.
+    The task in its own units, from ground truth; the terms sum to the reward and each is in
+    `info["reward_<term>"]` (weights: `gym.make(..., reward=RewardConfig(...))`, see `trade_gym.reward`):
+    `visible` +1 while the target is in view; `distance` -min(d / h, 1), d the horizontal distance to the
+    target, h the scene's follow height; `height` -0.5 min(|height above the target's ground - h| / h, 1);
+    `effort` -0.05 mean(action^2); `crash` -150 on a crash (more than flying on until the lost-target timeout
+    can lose, so a crash never pays). A frame of good following earns about 0.9; hovering a follow height
+    off the target about 0.
 
     ## Starting State
     The drone hovers at the scene's follow height with the target in view; tracking starts from
@@ -117,6 +122,9 @@ class TradeFollowEnv(gym.Env):
     - v0, issue 22: `perception_latency` and `perception_latency_ms`; the observation gains `estimate_age_s` and
       `info` the same; `track_valid` and `time_lost_s` describe the estimate held. With the default
       `perception_latency="none"` every other entry is as before.
+    - v0, issue 17: the reward is the task: terms `visible`, `distance`, `height`, `effort`, `crash` replace
+      `visible`, `centering`, `altitude`, `effort`, `crash` (centering paid for standing off the target while
+      accelerating; altitude for climbing half the target's height); `reward=` sets the weights.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -125,7 +133,6 @@ class TradeFollowEnv(gym.Env):
         self.config = EnvConfig(**kwargs)
         self.render_mode = self.config.render_mode
         self.quad_config = QuadrotorConfig()
-        self.reward_config = RewardConfig()
         self.camera_config = CameraConfig(
             width_px=self.config.camera_size,
             height_px=self.config.camera_size,
@@ -215,16 +222,7 @@ class TradeFollowEnv(gym.Env):
         visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
         self._time_target_hidden_s = 0.0 if visible else self._time_target_hidden_s + self.config.frame_dt_s
         self._steps += 1
-        reward, terms = compute_reward(
-            self.reward_config,
-            target_visible=visible,
-            target_pixel=truth.target_center_px,
-            image_size_px=self.config.camera_size,
-            height_above_target_m=self._state.position_m[2] - truth.target_position_m[2],
-            nominal_height_m=self.world.spec.follow_altitude_agl_m,
-            action=action,
-            crashed=crashed,
-        )
+        reward, terms = compute_reward(self.config.reward, self._reward_inputs(truth, visible, action, crashed))
         terminated = crashed or self._time_target_hidden_s >= self.config.lost_timeout_s
         truncated = self._steps >= self.config.max_episode_steps and not terminated
         self._last_estimate, self._last_truth, self._last_sensors = estimate, truth, sensors
@@ -428,6 +426,16 @@ class TradeFollowEnv(gym.Env):
             estimate_age_s=self._estimate_age_s,
             image_size_px=self.config.camera_size,
         )
+
+    def _reward_inputs(self, truth: GroundTruth, visible: bool, action: FloatArray, crashed: bool) -> RewardInputs:
+        drone, target = self._state.position_m, truth.target_position_m
+        return RewardInputs(
+            target_visible=visible,
+            horizontal_distance_m=math.hypot(target[0] - drone[0], target[1] - drone[1]),
+            height_above_target_ground_m=float(drone[2] - self.world.ground_height_m(float(target[0]),
+                                                                                     float(target[1]))),
+            follow_height_m=self.world.spec.follow_altitude_agl_m,
+            action=action, crashed=crashed)
 
     def _info(self, truth: GroundTruth, estimate: PerceptionOutput, crashed: bool,
               terms: dict[str, float] | None) -> dict[str, Any]:

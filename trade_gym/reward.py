@@ -1,8 +1,21 @@
-"""Reward of TradeFollow-v0 as named terms computed from ground truth; they sum to the reward.
+"""Reward of TradeFollow-v0: the following task in its own units, as named terms computed from ground truth.
 
-Terms: `visible` (+1 while the target is visible), `centering` (minus the target's distance
-from the image centre, in half-image units), `altitude` (minus the relative error of the
-height above the target), `effort` (minus the mean squared action) and `crash`.
+The terms sum to the reward (each is in `info["reward_<term>"]`):
+
+- `visible`: `+visible_bonus` on a frame whose target is in view (ground-truth visibility, so a policy is
+  paid for what happens, not for what perception believes). It keeps the reward of a good frame positive,
+  so ending the episode early never pays.
+- `distance`: `-distance_weight * min(d / h, 1)`, d the horizontal distance from the drone to the target
+  and h the scene's follow height: hovering a follow height off the target costs the whole bonus.
+- `height`: `-height_weight * min(|z - g - h| / h, 1)`, z the drone's height and g the terrain height
+  under the target: the drone is paid for holding the scene's follow height above the target's ground
+  (terrain only, so a roof or the target's own height does not move the set point).
+- `effort`: `-effort_weight * mean(action^2)`: a small price on commanded speed, against dithering.
+- `crash`: `-crash_penalty` on the frame the drone hits terrain or a building.
+
+Both errors saturate at one follow height, so a lost drone's reward stays bounded; the crash penalty is
+at least the worst loss of flying on until the lost-target timeout ends the episode (tested), so a crash
+never pays.
 """
 
 from __future__ import annotations
@@ -12,43 +25,53 @@ from dataclasses import dataclass
 
 from trade_gym.perception.base import FloatArray
 
+RELATIVE_ERROR_CAP = 1.0  # distance and height errors saturate at one follow height
+
 
 @dataclass(frozen=True)
 class RewardConfig:
-    """Weights of the reward terms (dimensionless)."""
+    """Weights of the reward terms, per frame (dimensionless; errors are in follow heights)."""
 
-    visible_weight: float = 1.0
-    centering_weight: float = 0.5
-    altitude_weight: float = 0.5
+    visible_bonus: float = 1.0
+    distance_weight: float = 1.0
+    height_weight: float = 0.5
     effort_weight: float = 0.05
-    crash_penalty: float = 10.0
+    # >= (distance_weight + height_weight + effort_weight) x lost-timeout frames (1.55 x 3 s x 30 Hz = 139.5)
+    crash_penalty: float = 150.0
+
+    def __post_init__(self) -> None:
+        for name in ("visible_bonus", "distance_weight", "height_weight", "effort_weight", "crash_penalty"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise ValueError(f"RewardConfig.{name} must be a finite number >= 0, got {value!r}")
+
+    def worst_frame_loss(self) -> float:
+        """The most a frame without a crash can lose: no target in view, both errors saturated, full action."""
+        return self.distance_weight * RELATIVE_ERROR_CAP + self.height_weight * RELATIVE_ERROR_CAP + self.effort_weight
 
 
-def compute_reward(
-    config: RewardConfig,
-    target_visible: bool,
-    target_pixel: FloatArray,
-    image_size_px: int,
-    height_above_target_m: float,
-    nominal_height_m: float,
-    action: FloatArray,
-    crashed: bool,
-) -> tuple[float, dict[str, float]]:
-    """(total, terms). target_pixel: (2,) projected target centre [px], NaN when behind the camera."""
-    half = image_size_px / 2.0
-    u, v = float(target_pixel[0]), float(target_pixel[1])
-    if target_visible and math.isfinite(u) and math.isfinite(v):
-        # distance from the principal point (half - 0.5, half - 0.5) in half-image units
-        offset = math.hypot(u - (half - 0.5), v - (half - 0.5)) / half
-        centering = -min(offset, 1.0)
-    else:
-        centering = -1.0
-    altitude_error = abs(height_above_target_m - nominal_height_m) / nominal_height_m
+@dataclass(frozen=True)
+class RewardInputs:
+    """What one frame's reward depends on (ground truth and the action applied)."""
+
+    target_visible: bool
+    horizontal_distance_m: float
+    height_above_target_ground_m: float  # drone height minus the terrain height under the target
+    follow_height_m: float  # the scene's nominal height above the ground
+    action: FloatArray
+    crashed: bool
+
+
+def compute_reward(config: RewardConfig, x: RewardInputs) -> tuple[float, dict[str, float]]:
+    """(total, terms) of one frame; the terms sum to the total."""
+    h = x.follow_height_m
+    distance_error = min(x.horizontal_distance_m / h, RELATIVE_ERROR_CAP)
+    height_error = min(abs(x.height_above_target_ground_m - h) / h, RELATIVE_ERROR_CAP)
     terms = {
-        "visible": config.visible_weight * float(target_visible),
-        "centering": config.centering_weight * centering,
-        "altitude": -config.altitude_weight * min(altitude_error, 1.0),
-        "effort": -config.effort_weight * sum(float(a) * float(a) for a in action) / len(action),
-        "crash": -config.crash_penalty * float(crashed),
+        "visible": config.visible_bonus * float(x.target_visible),
+        "distance": -config.distance_weight * distance_error,
+        "height": -config.height_weight * height_error,
+        "effort": -config.effort_weight * sum(float(a) * float(a) for a in x.action) / len(x.action),
+        "crash": -config.crash_penalty * float(x.crashed),
     }
     return float(sum(terms.values())), terms
