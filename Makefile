@@ -3,6 +3,8 @@ PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+# make test's reference check writes its results here (git-ignored)
+CHECK_OUT := reference_check_out
 
 .PHONY: demo test test-slow bench clean-venv
 
@@ -20,6 +22,8 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(PY) -m pytest -q -p no:cacheprovider
+	# the regression guard: every quick-suite run must reproduce trade_gym/bench/quick_reference.json (~1-3 min)
+	$(VENV)/bin/trade-bench --suite quick --out $(CHECK_OUT) --check-reference
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow

@@ -32,6 +32,7 @@ EXIT_USAGE, EXIT_FAILED = 2, 1
 SWITCH_VALUES = {"true": (True,), "on": (True,), "1": (True,), "false": (False,), "off": (False,), "0": (False,),
                  "both": (False, True)}
 DEFAULT_CUSTOM_JOBS = 1
+REFERENCE_SUITE = "quick"  # the suite the regression reference records
 MIN_STEPS, MIN_CAMERA_PX, MIN_JOBS = 1, 16, 1  # EnvConfig's camera_size floor is 16 px
 
 
@@ -71,9 +72,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", type=Path, metavar="RESULTS_JSON", help="run nothing: render results.md and the "
                    "plots of an earlier run's results.json (and its series.npz, when beside it) into --out")
     p.add_argument("--write-reference", nargs="?", const=reference.reference_path(), type=Path, metavar="PATH",
-                   help="quick suite only: write its metrics as the regression reference")
+                   help="the whole quick suite only, from a clean git tree (its commit is recorded): write its "
+                   "metrics as the regression reference")
     p.add_argument("--check-reference", nargs="?", const=reference.reference_path(), type=Path, metavar="PATH",
-                   help="compare the metrics with the regression reference; exit 1 on a regression")
+                   help="quick suite (filters allowed, no overrides): compare every run with the regression "
+                   "reference; exit 1 on a change beyond float drift, better or worse, or on a missing run")
     return p
 
 
@@ -175,13 +178,29 @@ def _check_paths(args: argparse.Namespace, selection: Selection) -> None:
         raise UsageError(f"--out {args.out}: parent folder {args.out.parent} does not exist")
     if args.out.exists() and not args.out.is_dir():
         raise UsageError(f"--out {args.out} exists and is not a folder")
+    _check_reference_args(args, selection)
+
+
+def _check_reference_args(args: argparse.Namespace, selection: Selection) -> None:
+    """--write-reference: the whole quick suite, from a clean git tree (the reference records its commit).
+    --check-reference: the quick suite, filtered or not, but with its own seeds, steps and camera size."""
     if args.write_reference is not None:
-        if args.suite != "quick" or selection != Selection():
-            raise UsageError("--write-reference needs --suite quick without filters or overrides")
+        if args.suite != REFERENCE_SUITE or selection != Selection():
+            raise UsageError(f"--write-reference needs --suite {REFERENCE_SUITE} without filters or overrides")
         if not args.write_reference.parent.is_dir():
             raise UsageError(f"--write-reference {args.write_reference}: parent folder does not exist")
-    if args.check_reference is not None and not args.check_reference.is_file():
-        raise UsageError(f"--check-reference {args.check_reference}: no such file")
+        try:
+            reference.clean_commit()
+        except reference.UncleanTree as exc:
+            raise UsageError(f"--write-reference: {exc}") from None
+    if args.check_reference is not None:
+        overrides = [flag for flag, value in (("--seeds", selection.seeds), ("--steps", selection.steps),
+                                              ("--camera-size", selection.camera_size)) if value is not None]
+        if args.suite != REFERENCE_SUITE or overrides:
+            raise UsageError(f"--check-reference needs --suite {REFERENCE_SUITE} without overrides"
+                             + (f" (got {' '.join(overrides)})" if overrides else ""))
+        if not args.check_reference.is_file():
+            raise UsageError(f"--check-reference {args.check_reference}: no such file")
 
 
 def _check_record(args: argparse.Namespace, specs: Sequence[RunSpec]) -> None:
@@ -307,6 +326,31 @@ def render_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _reference_steps(args: argparse.Namespace, results: list[RunResult], filtered: bool) -> int:
+    """--write-reference and --check-reference after the runs; their exit status (0 when fine or not asked)."""
+    status = 0
+    if args.write_reference is not None:
+        if any(r.error for r in results):
+            print(f"{PROG}: reference not written: some runs failed", file=sys.stderr)
+        else:
+            try:
+                reference.write_reference(results, args.write_reference)
+                print(f"wrote reference {args.write_reference}", file=sys.stderr)
+            except reference.UncleanTree as exc:  # the tree changed while the suite ran
+                print(f"{PROG}: error: reference not written: {exc}", file=sys.stderr)
+                status = EXIT_USAGE
+    if args.check_reference is not None:
+        check = reference.check_against_reference(results, reference.load_reference(args.check_reference), filtered)
+        print(check.summary_line(), file=sys.stderr)
+        for line in check.problems:
+            print(f"  {line}", file=sys.stderr)
+        if check.problems:
+            print(f"  a change either way fails; if intended, re-record: {reference.REGENERATE_COMMAND}",
+                  file=sys.stderr)
+            status = status or EXIT_FAILED
+    return status
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
@@ -341,17 +385,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if failed := [r for r in results if r.error]:
         print(f"{PROG}: {len(failed)} of {len(results)} runs failed (see results.md)", file=sys.stderr)
         status = EXIT_FAILED
-    if args.write_reference is not None and not failed:
-        reference.write_reference(results, args.write_reference)
-        print(f"wrote reference {args.write_reference}", file=sys.stderr)
-    elif args.write_reference is not None:
-        print(f"{PROG}: reference not written: some runs failed", file=sys.stderr)
-    if args.check_reference is not None:
-        problems, compared = reference.check_against_reference(results, reference.load_reference(args.check_reference))
-        print(f"reference check: {compared} runs compared, {len(problems)} regressions", file=sys.stderr)
-        for line in problems:
-            print(f"  {line}", file=sys.stderr)
-        status = status or (EXIT_FAILED if problems else 0)
+    status = _reference_steps(args, results, selection != Selection()) or status
     if args.record is not None:
         print(f"sequences of the runs recorded under {args.record} (replay: trade-replay SEQUENCE --out DIR)",
               file=sys.stderr)

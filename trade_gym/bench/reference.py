@@ -1,7 +1,17 @@
-"""Regression guard: the quick suite's fixed-seed metrics, committed as a reference, and the
-tolerances within which a new run may be worse than it.
+"""Regression guard: the quick suite's fixed-seed metrics, committed as a reference, and the check that a
+new run reproduces every one of them, in either direction, within a stated float tolerance.
 
-Regenerate (after an intended change, on a quiet machine):
+The rule (`TOLERANCES`): counts and flags (steps, frames, decoy switches, crashed) must match exactly; every
+other metric may differ from the reference by at most FLOAT_ABS_TOL + FLOAT_REL_TOL x |reference|. Why so
+tight: on one machine the runs are bit-identical, so any difference is a change in behaviour; across CPUs
+and library builds float results drift in the last digits (~1e-15 relative seen so far), and 1e-6 leaves
+ample room for that while one frame scored differently moves a fraction of a 150-300-frame run by >= 3e-3.
+A change is a failure whether it is better or worse: an improvement is re-recorded on purpose, with its
+numbers in the commit message. The check also fails on a run of the suite missing from the reference, a
+reference run missing from the results (unless the suite was filtered), a run that failed, and a metric
+present on one side only.
+
+Regenerate (after an intended change, from a clean git tree, whose commit the reference records):
     trade-bench --suite quick --out /tmp/quick --write-reference
 """
 
@@ -9,6 +19,7 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -16,46 +27,61 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from trade_gym.bench.results import git_commit, to_json_safe
+from trade_gym.bench.results import to_json_safe
 from trade_gym.bench.runner import RunResult
+from trade_gym.provenance import git_head, tracked_changes
 
 REFERENCE_FILE = "quick_reference.json"
 REGENERATE_COMMAND = "trade-bench --suite quick --out /tmp/quick --write-reference"
+REPO_DIR = Path(__file__).resolve().parent  # git runs here: the checkout this code was loaded from
+SHOWN_CHANGES = 5  # changed files named in the dirty-tree error
 
 
 @dataclass(frozen=True)
 class Tolerance:
-    """A metric may be worse than the reference by abs_tol + rel_tol * |reference|; `higher_is_better`
-    says which way is worse. Improvements never fail."""
+    """A metric may differ from its reference, either way, by at most abs_tol + rel_tol * |reference|."""
 
-    higher_is_better: bool
-    abs_tol: float
+    abs_tol: float = 0.0
     rel_tol: float = 0.0
 
-    def worse_by(self, reference: float, value: float) -> float:
-        """How far `value` is on the bad side of `reference` beyond the tolerance (> 0 fails)."""
-        worse = reference - value if self.higher_is_better else value - reference
-        return worse - (self.abs_tol + self.rel_tol * abs(reference))
+    def __post_init__(self) -> None:
+        for name in ("abs_tol", "rel_tol"):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"Tolerance.{name} must be >= 0, got {getattr(self, name)!r}")
+
+    def allowed(self, reference: float) -> float:
+        return self.abs_tol + self.rel_tol * abs(reference)
+
+    def exceeded_by(self, reference: float, value: float) -> float:
+        """How far |value - reference| is beyond the allowed difference (> 0 fails)."""
+        return abs(value - reference) - self.allowed(reference)
 
 
-# Same-machine runs are bit-identical; these margins absorb float drift across CPUs and libraries
-# (a closed loop amplifies it) and harmless refactors, yet fail a lost target (5 % of the frames is
-# 7 frames of a 150-frame run), a new decoy switch, or depth error grown by a quarter.
+# Float drift across CPUs and libraries (see the module docstring for why these values).
+FLOAT_ABS_TOL, FLOAT_REL_TOL = 1e-9, 1e-6
+EXACT = Tolerance()
+FLOAT_DRIFT = Tolerance(FLOAT_ABS_TOL, FLOAT_REL_TOL)
 TOLERANCES: dict[str, Tolerance] = {
-    "steps": Tolerance(True, 0.0),  # an earlier termination (target lost, crash) always fails
-    "visible_fraction": Tolerance(True, 0.05),
-    "tracked_fraction": Tolerance(True, 0.05),
-    "success_auc": Tolerance(True, 0.05),
-    "precision_20px": Tolerance(True, 0.05),
-    "longest_lost_streak_s": Tolerance(False, 0.5),
-    "decoy_switches": Tolerance(False, 0.0),
-    "ground_depth_rmse_m": Tolerance(False, 0.05, 0.25),
-    "target_depth_rmse_m": Tolerance(False, 0.05, 0.25),
-    "ground_depth_frames": Tolerance(True, 0.0, 0.2),
-    "target_depth_frames": Tolerance(True, 0.0, 0.2),
-    "mean_horizontal_error_m": Tolerance(False, 0.25, 0.25),
-    "crashed": Tolerance(False, 0.0),
+    "steps": EXACT,
+    "visible_fraction": FLOAT_DRIFT,
+    "tracked_fraction": FLOAT_DRIFT,
+    "success_auc": FLOAT_DRIFT,
+    "precision_20px": FLOAT_DRIFT,
+    "longest_lost_streak_s": FLOAT_DRIFT,
+    "decoy_switches": EXACT,
+    "ground_depth_rmse_m": FLOAT_DRIFT,
+    "ground_depth_frames": EXACT,
+    "target_depth_rmse_m": FLOAT_DRIFT,
+    "target_depth_frames": EXACT,
+    "mean_horizontal_error_m": FLOAT_DRIFT,
+    "crashed": EXACT,
+    "ground_depth_bias_m": FLOAT_DRIFT,
+    "initial_iou": FLOAT_DRIFT,
 }
+
+
+class UncleanTree(ValueError):
+    """The checkout has changes to tracked files (or is no checkout), so no clean commit names the code."""
 
 
 def reference_path() -> Path:
@@ -63,11 +89,28 @@ def reference_path() -> Path:
     return Path(str(resources.files("trade_gym.bench").joinpath(REFERENCE_FILE)))
 
 
+def clean_commit(repo: Path | None = None) -> str:
+    """HEAD's short hash when the checkout at `repo` (default REPO_DIR) has no changed tracked files; else
+    UncleanTree naming the changes."""
+    repo = REPO_DIR if repo is None else repo
+    try:
+        commit, changes = git_head(repo), tracked_changes(repo)
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise UncleanTree(f"{repo} is not in a git checkout ({type(exc).__name__}); the reference records "
+                          f"the commit it was measured at") from None
+    if changes:
+        shown = ", ".join(changes[:SHOWN_CHANGES]) + (", ..." if len(changes) > SHOWN_CHANGES else "")
+        raise UncleanTree(f"the git tree at {commit} is dirty ({len(changes)} changed tracked files: {shown}); "
+                          f"commit or stash them first, the reference records a clean commit")
+    return commit
+
+
 def reference_document(results: Sequence[RunResult]) -> dict[str, Any]:
+    """The reference of `results` (finished runs only); UncleanTree on a dirty checkout."""
     return {
         "about": "trade-bench quick-suite metrics for fixed seeds (regression guard); regenerate with: "
                  + REGENERATE_COMMAND,
-        "commit": git_commit(Path(__file__).resolve().parent),
+        "commit": clean_commit(),
         "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "runs": {r.spec.run_id: {"steps_requested": r.spec.steps, "camera_size": r.spec.camera_size,
                                  "metrics": dict(r.metrics)} for r in results if r.error is None},
@@ -75,7 +118,9 @@ def reference_document(results: Sequence[RunResult]) -> dict[str, Any]:
 
 
 def write_reference(results: Sequence[RunResult], path: Path) -> None:
-    path.write_text(json.dumps(to_json_safe(reference_document(results)), indent=1, allow_nan=False) + "\n")
+    """Write the reference; UncleanTree (nothing written) on a dirty checkout."""
+    document = reference_document(results)
+    path.write_text(json.dumps(to_json_safe(document), indent=1, allow_nan=False) + "\n")
 
 
 def load_reference(path: Path | None = None) -> dict[str, Any]:
@@ -86,33 +131,80 @@ def _as_float(value: Any) -> float:
     return math.nan if value is None else float(value)
 
 
+def _metric_problem(name: str, reference: Any, value: Any) -> str | None:
+    """Why `value` does not reproduce `reference` for metric `name`, or None when it does."""
+    tol = TOLERANCES.get(name)
+    if tol is None:
+        return f"{name} has no stated tolerance (add it to trade_gym.bench.reference.TOLERANCES)"
+    ref, now = _as_float(reference), _as_float(value)
+    if math.isnan(ref) and math.isnan(now):
+        return None
+    if math.isnan(ref) or math.isnan(now):
+        return f"{name} = {now:.12g}, reference {ref:.12g} (defined on one side only)"
+    if tol.exceeded_by(ref, now) > 0.0:
+        return (f"{name} = {now:.12g}, reference {ref:.12g} ({now - ref:+.3g}, allowed "
+                f"±{tol.allowed(ref):.3g}: {tol.abs_tol:g} + {tol.rel_tol:g} x |ref|)")
+    return None
+
+
 def compare_run(run_id: str, metrics: dict[str, Any], reference: dict[str, Any]) -> list[str]:
-    """One line per metric of `metrics` that is worse than `reference` beyond its tolerance; a metric
-    defined in the reference but undefined now (NaN) is worse."""
+    """One line per metric of `metrics` that differs from `reference`, either way, beyond its tolerance, or
+    that is on one side only."""
     problems = []
-    for name, tol in TOLERANCES.items():
-        ref, value = _as_float(reference.get(name)), _as_float(metrics.get(name))
-        if math.isnan(ref):
-            continue
-        if math.isnan(value):
-            problems.append(f"{run_id}: {name} is undefined, reference {ref:.4g}")
-        elif tol.worse_by(ref, value) > 0.0:
-            direction = "lower" if tol.higher_is_better else "higher"
-            problems.append(f"{run_id}: {name} = {value:.4g}, reference {ref:.4g} "
-                            f"(allowed {tol.abs_tol:g} + {tol.rel_tol:g} x |ref| {direction})")
+    for name in dict.fromkeys([*reference, *metrics]):
+        if name not in metrics:
+            problems.append(f"{run_id}: {name} is in the reference, not in the results")
+        elif name not in reference:
+            problems.append(f"{run_id}: {name} is in the results, not in the reference")
+        elif (problem := _metric_problem(name, reference[name], metrics[name])) is not None:
+            problems.append(f"{run_id}: {problem}")
     return problems
 
 
-def check_against_reference(results: Sequence[RunResult], reference: dict[str, Any]) -> tuple[list[str], int]:
-    """(regressions, runs compared): runs whose id, length and camera match a reference entry."""
+@dataclass(frozen=True)
+class ReferenceCheck:
+    """Outcome of `check_against_reference`: every difference found, and how many runs were compared."""
+
+    problems: tuple[str, ...]
+    compared: int  # runs whose metrics were compared (all present, same length and camera, no error)
+    reference_runs: int  # runs in the reference
+    filtered: bool  # only a part of the suite was run, so reference runs without a result were not required
+
+    def summary_line(self) -> str:
+        scope = " (suite filtered)" if self.filtered else ""
+        count = len(self.problems)
+        return (f"reference check: {self.compared} of {self.reference_runs} reference runs compared{scope}, "
+                f"{count} problem{'' if count == 1 else 's'}")
+
+
+def _run_problem(result: RunResult, entry: dict[str, Any] | None) -> str | None:
+    """Why `result` cannot be compared with its reference entry, or None."""
+    spec = result.spec
+    if entry is None:
+        return f"{spec.run_id}: not in the reference"
+    if (entry["steps_requested"], entry["camera_size"]) != (spec.steps, spec.camera_size):
+        return (f"{spec.run_id}: {spec.steps} steps at {spec.camera_size} px, reference "
+                f"{entry['steps_requested']} steps at {entry['camera_size']} px")
+    if result.error is not None:
+        return f"{spec.run_id}: failed: {result.error}"
+    return None
+
+
+def check_against_reference(results: Sequence[RunResult], reference: dict[str, Any],
+                            filtered: bool = False) -> ReferenceCheck:
+    """Compare every result with its reference entry. A result without an entry (or of another length or
+    camera size, or failed) is a problem; so is a reference run without a result, unless `filtered` says
+    only a part of the suite was run."""
+    runs: dict[str, Any] = reference["runs"]
     problems, compared = [], 0
-    for r in results:
-        entry = reference["runs"].get(r.spec.run_id)
-        if entry is None or entry["steps_requested"] != r.spec.steps or entry["camera_size"] != r.spec.camera_size:
+    for result in results:
+        entry = runs.get(result.spec.run_id)
+        if (problem := _run_problem(result, entry)) is not None:
+            problems.append(problem)
             continue
         compared += 1
-        if r.error is not None:
-            problems.append(f"{r.spec.run_id}: failed: {r.error}")
-            continue
-        problems += compare_run(r.spec.run_id, r.metrics, entry["metrics"])
-    return problems, compared
+        problems += compare_run(result.spec.run_id, result.metrics, entry["metrics"])
+    if not filtered:
+        present = {r.spec.run_id for r in results}
+        problems += [f"{run_id}: in the reference, not in the results" for run_id in runs if run_id not in present]
+    return ReferenceCheck(tuple(problems), compared, len(runs), filtered)
