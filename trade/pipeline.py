@@ -22,10 +22,9 @@ from trade.planes import MultiRansacConfig, Plane, multi_ransac
 from trade.raycast import RaycastConfig, depth_uncertainty, raycast_plane
 from trade.roi_features import RoiConfig, RoiFeatures, RoiFeatureTracker
 from trade.temporal_fusion import TemporalFusionConfig, TemporalPlaneFusion
-from trade.tracking.colour_box import ColourBoxConfig
-from trade.tracking.dcf import DcfConfig, DcfTracker
+from trade.tracking.dcf import DcfTracker
 from trade.tracking.guided import GuidedTracker
-from trade.tracking.peaks import PeakConfig
+from trade.tracking.guided_config import GuidedTrackerConfig
 from trade.trajectory import TrajectoryConfig, TrajectoryModel
 from trade.types import BBox, ImuBatch, PixelPrediction
 
@@ -38,11 +37,10 @@ PAPER_RANSAC = MultiRansacConfig(parallel_min_separation_m=math.inf, flatness_to
 
 @dataclass(frozen=True)
 class PipelineConfig:
-    """Paper defaults; every ablation of the paper is a switch."""
+    """Paper defaults; every ablation of the paper is a switch (trajectory guidance is the tracker's:
+    `tracker.trajectory_guidance`)."""
 
-    dcf: DcfConfig = field(default_factory=DcfConfig)
-    peaks: PeakConfig = field(default_factory=PeakConfig)
-    colour_box: ColourBoxConfig = field(default_factory=ColourBoxConfig)
+    tracker: GuidedTrackerConfig = field(default_factory=GuidedTrackerConfig)
     trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
     roi: RoiConfig = field(default_factory=RoiConfig)
     ransac: MultiRansacConfig = PAPER_RANSAC
@@ -50,23 +48,6 @@ class PipelineConfig:
     raycast: RaycastConfig = field(default_factory=RaycastConfig)
     ground_filter: GroundFilterConfig = field(default_factory=GroundFilterConfig)
     depth_only: DepthOnlyConfig = field(default_factory=DepthOnlyConfig)
-    trajectory_guidance: bool = True  # False: the "dcf" baseline (window on the last box, top peak)
-    box_refinement: bool = True  # fit the box to the target's colour blob (the DCF keeps its aspect)
-    # Snap the initial box to the colour blob at its centre before the tracker learns from it. A box
-    # drawn (or perturbed, as in the paper's protocol) a few px off a small target otherwise teaches the
-    # DCF a template that is half ground, which then holds on to the ground (desert, 256 px: +-5 px is
-    # half the car's width). Off by default: an exact box is better left as it is (a truck's colour blob
-    # is its cargo box alone; city, clean start: mean IoU over 90 frames 0.61 snapped against 0.79).
-    snap_initial_box: bool = False
-    # Before the blob snap, the given box is moved to the offset that best separates its colours from its
-    # surround (ColourBoxRefiner.separation), over whole-px shifts up to this fraction of its shorter side
-    # along each axis: a box that is off by more than half its width mostly covers something else, and the
-    # blob at its centre is then the ground or a roof edge beside the target.
-    snap_search_fraction: float = 0.5
-    snap_iterations: int = 2  # colour relearning passes of the snap before its blob is judged
-    # the snapped box's width and height must each lie within this factor of the given box's (a blob that
-    # merges with a neighbour or keeps a sliver is not the target)
-    snap_max_side_ratio: float = 1.4
     temporal_fusion: bool = True
     ground_mask: bool = False  # plane fit only on tracks the single-image-depth ground mask keeps
     # Depth-only mode of the paper's Table 2: the target depth read from the aligned single-image depth map
@@ -82,40 +63,6 @@ class PipelineConfig:
     # plane: this replaces min_plane_points and fusion.min_points. City at 32 m: 6-9 converged tracks pass per
     # frame; at 10, seed 3 (300 frames, gt pose) never had a plane, at 6 its ground RMSE is 1.27 m.
     min_masked_plane_points: int = 6
-    min_peak_score: float = 0.15  # below: the target is lost this frame and the estimate coasts
-    # search the constant-image-velocity window too when the prediction is offset from it by more than
-    # this fraction of the window
-    second_window_offset_fraction: float = 0.25
-    # Re-detection after an untracked frame. A coasting prediction drifts (after 1-3 s under a roof 12-16 px
-    # at 160 px, more than half the 2x-box window), so besides the prediction's window the windows on a grid
-    # of `reacquire_rings` rings around it, `reacquire_step_fraction` of the window apart, are searched. A
-    # peak is taken back only at `reacquire_min_peak_score` (hysteresis: clutter near the prediction scores
-    # 0.1-0.2 while the target is hidden) and where the colour model finds the target's blob. A peak in the
-    # prediction's window is taken without the colour check at `reacquire_confident_score`: a target
-    # re-emerging from under an occluder shows only part of its blob, which the colour model refuses.
-    reacquire_rings: int = 1
-    reacquire_step_fraction: float = 0.5
-    reacquire_min_peak_score: float = 0.2
-    reacquire_confident_score: float = 0.35
-    # Validation gate of re-detection: a candidate is taken only where the trajectory model says the target
-    # can be, d^2 = r^T (C + s^2 I)^-1 r <= reacquire_gate_chi2, r its offset from the prediction [px], C the
-    # prediction's projected position covariance (it grows with the time lost) and s the localisation sigma
-    # of a re-detected peak, reacquire_gate_box_sigma x the box's longer side (a target coming out from under
-    # an occluder shows part of its blob). 9.21 is the 99 % point of chi-square with 2 degrees of freedom;
-    # inf turns the gate off. Without it, an identical car passing 20-35 px beside a hidden target was taken
-    # within 1-8 frames of the loss. Candidates in the gate are tried most probable first: score / T - d^2 / 2
-    # (the paper's softmax likelihood times the prediction's Gaussian).
-    reacquire_gate_chi2: float = 9.21
-    reacquire_gate_box_sigma: float = 0.25
-    # While lost, size the search and coasting boxes by the prediction's depth (apparent size ~ 1 / depth)
-    # from their size at the last tracked frame. Under a 1-3 s occlusion in the desert the target's box
-    # shrank 1.4x per side while the boxes kept their size, and the refiner's area test then refused the
-    # target and took a lookalike. Only while both depths are known to coast_scale_max_relative_sigma (the
-    # model's depth 1-sigma over the depth): a 3D estimate that has gone wrong would otherwise shrink the
-    # boxes to nothing (in city reset seed 1 the target was put 0.2 m from the camera, relative sigma
-    # 1.8-3.7; under the desert occlusions of up to 3 s it stayed within 0.26, median 0.06).
-    coast_scale_from_depth: bool = True
-    coast_scale_max_relative_sigma: float = 0.3
     trajectory_preview_s: float = 1.0  # horizon of the predicted trajectory kept for drawing
     trajectory_preview_points: int = 10
 
@@ -126,32 +73,10 @@ class PipelineConfig:
                              f"ground_mask={self.ground_mask!r}")
         if not (math.isfinite(self.object_height_m) and self.object_height_m >= 0):
             raise ValueError(f"PipelineConfig.object_height_m must be finite and >= 0, got {self.object_height_m!r}")
-        for name in ("snap_iterations", "reacquire_rings"):
-            value = getattr(self, name)
-            if int(value) != value or value < 0:
-                raise ValueError(f"PipelineConfig.{name} must be an integer >= 0, got {value!r}")
         for name in ("min_plane_points", "min_masked_plane_points"):
             value = getattr(self, name)
             if int(value) != value or not 3 <= value <= self.fusion.buffer_size:
                 raise ValueError(f"PipelineConfig.{name} must be an integer in [3, fusion.buffer_size], got {value!r}")
-        for name in ("min_peak_score", "reacquire_min_peak_score", "reacquire_confident_score"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"PipelineConfig.{name} must be finite, got {getattr(self, name)!r}")
-        if not self.reacquire_gate_chi2 > 0:  # inf allowed (no gate); NaN fails
-            raise ValueError("PipelineConfig.reacquire_gate_chi2 must be > 0 (inf: no gate), "
-                             f"got {self.reacquire_gate_chi2!r}")
-        if not (math.isfinite(self.reacquire_gate_box_sigma) and self.reacquire_gate_box_sigma > 0):
-            raise ValueError("PipelineConfig.reacquire_gate_box_sigma must be finite and > 0, "
-                             f"got {self.reacquire_gate_box_sigma!r}")
-        if not (math.isfinite(self.snap_search_fraction) and self.snap_search_fraction >= 0.0):
-            raise ValueError("PipelineConfig.snap_search_fraction must be finite and >= 0 (0: no search), "
-                             f"got {self.snap_search_fraction!r}")
-        if not (math.isfinite(self.snap_max_side_ratio) and self.snap_max_side_ratio >= 1.0):
-            raise ValueError(f"PipelineConfig.snap_max_side_ratio must be finite and >= 1, got {self.snap_max_side_ratio!r}")
-        for name in ("second_window_offset_fraction", "reacquire_step_fraction", "coast_scale_max_relative_sigma"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"PipelineConfig.{name} must be finite and > 0, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -220,7 +145,7 @@ class TradePipeline:
         self.config = config
         self.intrinsics = intrinsics
         self._rng = rng
-        self.tracking = GuidedTracker(config)
+        self.tracking = GuidedTracker(config.tracker)
         self.trajectory = TrajectoryModel(config.trajectory)
         self.roi = RoiFeatureTracker(config.roi, intrinsics)
         self._min_plane_points = config.min_masked_plane_points if config.ground_mask else config.min_plane_points

@@ -12,7 +12,7 @@ import pytest
 
 from tests.trade.planar_scene import OCCLUDER_GREY, PlanarScene, occlude
 from trade.pipeline import PipelineConfig, TradePipeline
-from trade.tracking import GuidedTracker
+from trade.tracking import GuidedTracker, GuidedTrackerConfig
 from trade.types import BBox, PixelPrediction, iou
 
 ALTITUDE_M = 15.0  # the 4 m target is ~17 px across at 128 px, 90 deg
@@ -73,7 +73,7 @@ def test_reacquisition_leaves_an_identical_car_in_the_next_lane_alone_while_the_
     assert not any(r.tracked for r in records if r.occluded)
     assert all(r.tracked and r.iou_target >= 0.8 for r in _back(records))
     assert all(r.iou_lookalike == 0.0 for r in records)
-    ungated = _occlusion_run(PipelineConfig(object_height_m=0.0, reacquire_gate_chi2=math.inf),
+    ungated = _occlusion_run(PipelineConfig(object_height_m=0.0, tracker=GuidedTrackerConfig(reacquire_gate_chi2=math.inf)),
                              lane_offset_m=LANE_OFFSET_M)
     assert any(r.tracked and r.iou_lookalike >= 0.8 for r in ungated if r.occluded)
     assert all(r.iou_target == 0.0 for r in _back(ungated))
@@ -85,11 +85,12 @@ def test_reacquisition_sizes_the_boxes_by_the_predicted_depth_after_a_climb():
     the colour model refuses the smaller blob and the first frames back are lost or off."""
     records = _occlusion_run(PipelineConfig(object_height_m=0.0), climb_m=CLIMB_M)
     assert all(r.tracked and r.iou_target >= 0.8 for r in _back(records))
-    unscaled = _occlusion_run(PipelineConfig(object_height_m=0.0, coast_scale_from_depth=False), climb_m=CLIMB_M)
+    unscaled_config = PipelineConfig(object_height_m=0.0, tracker=GuidedTrackerConfig(coast_scale_from_depth=False))
+    unscaled = _occlusion_run(unscaled_config, climb_m=CLIMB_M)
     assert all(r.iou_target < 0.5 for r in _back(unscaled)[:5])
 
 
-def _lost_tracker(config: PipelineConfig) -> tuple[GuidedTracker, BBox, np.ndarray]:
+def _lost_tracker(config: GuidedTrackerConfig) -> tuple[GuidedTracker, BBox, np.ndarray]:
     """A tracker that learnt the planar scene's target at 15 m (prediction at 15 m, sigma 0.5 m), then lost
     it on a blank frame; its last tracked output box; the blank frame."""
     scene = PlanarScene.make(size_px=128, fov_deg=90.0, seed=0)
@@ -106,7 +107,7 @@ def _lost_tracker(config: PipelineConfig) -> tuple[GuidedTracker, BBox, np.ndarr
 
 
 def test_coasting_boxes_follow_the_predicted_depth_only_while_it_is_known():
-    config = PipelineConfig()
+    config = GuidedTrackerConfig()
     tracker, tracked_box, blank = _lost_tracker(config)
     size_px = np.array([tracker.dcf.box.w_px, tracker.dcf.box.h_px])
     centre = tracker.dcf.box.center

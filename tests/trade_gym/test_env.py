@@ -189,7 +189,7 @@ def test_default_env_is_full_trade_with_ground_mask_and_temporal_fusion():
         perception = env.unwrapped.perception
         stack = perception.pipeline_config
         assert env.unwrapped.config.perception == "trade"
-        assert stack.ground_mask and stack.temporal_fusion and stack.trajectory_guidance
+        assert stack.ground_mask and stack.temporal_fusion and stack.tracker.trajectory_guidance
         assert not stack.single_image_depth and perception.depth_model is not None
     finally:
         env.close()

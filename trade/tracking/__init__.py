@@ -8,6 +8,7 @@ from trade.tracking.colour_box import BoxRefinement, ColourBoxConfig, ColourBoxR
 from trade.tracking.dcf import DcfConfig, DcfTracker
 from trade.tracking.features import FeatureConfig, extract_features
 from trade.tracking.guided import GuidedTracker, TrackedFrame
+from trade.tracking.guided_config import GuidedTrackerConfig
 from trade.tracking.peaks import PeakChoice, PeakConfig, ResponseMap, highest_peak, select_peak
 from trade.tracking.scale import ScaleConfig
 from trade.tracking.window import sample_windows
@@ -20,6 +21,7 @@ __all__ = [
     "DcfTracker",
     "FeatureConfig",
     "GuidedTracker",
+    "GuidedTrackerConfig",
     "PeakChoice",
     "PeakConfig",
     "ResponseMap",

@@ -3,8 +3,8 @@
 Owns the DCF and the colour model, the choice of a peak near the trajectory prediction (with the
 constant-image-velocity window as a second opinion), re-detection while lost (inside the prediction's
 validation gate, with the boxes sized by its depth), the output box (colour-blob refinement, or coasting on
-the prediction) and the optional snapping of the initial box. The settings are the tracking fields of
-`trade.pipeline.PipelineConfig`.
+the prediction) and the optional snapping of the initial box. Its settings are `GuidedTrackerConfig`; the
+DCF and the colour refiner are injected (built from the config when not given).
 """
 
 from __future__ import annotations
@@ -12,18 +12,15 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from trade.tracking.colour_box import ColourBoxRefiner
 from trade.tracking.dcf import DcfTracker
+from trade.tracking.guided_config import GuidedTrackerConfig
 from trade.tracking.peaks import PeakChoice, highest_peak, peaks_above, select_peak
 from trade.types import BBox, PixelPrediction
-
-if TYPE_CHECKING:
-    from trade.pipeline import PipelineConfig
 
 FloatArray = npt.NDArray[np.float64]
 ImageRGB = npt.NDArray[np.uint8]
@@ -47,12 +44,14 @@ def _inside(pixel: FloatArray, image_rgb: ImageRGB) -> bool:
 
 class GuidedTracker:
     """`init(image, box)` once, then `step(image, prediction)` per frame (`PixelPrediction.none()` when
-    there is no trajectory prediction)."""
+    there is no trajectory prediction). `dcf` and `refiner` default to ones built from `config.dcf` and
+    `config.colour_box`; the search window is the DCF's (its `config.padding` x its box)."""
 
-    def __init__(self, config: PipelineConfig) -> None:
+    def __init__(self, config: GuidedTrackerConfig, dcf: DcfTracker | None = None,
+                 refiner: ColourBoxRefiner | None = None) -> None:
         self.config = config
-        self.dcf = DcfTracker(config.dcf)
-        self.refiner = ColourBoxRefiner(config.colour_box)
+        self.dcf = dcf if dcf is not None else DcfTracker(config.dcf)
+        self.refiner = refiner if refiner is not None else ColourBoxRefiner(config.colour_box)
         self._box: BBox | None = None  # last output box
         self._image_motion_px = np.zeros(2)  # last frame-to-frame shift of the tracked box centre (x, y)
         self._tracked_last = True  # whether the previous frame was tracked (its shift is then current)
@@ -110,7 +109,7 @@ class GuidedTracker:
 
     def _size_by_depth(self, prediction: PixelPrediction) -> None:
         """While lost, scale the DCF and output boxes from their size at the last tracked frame by the ratio
-        of that frame's predicted depth to this one's (PipelineConfig.coast_scale_from_depth), when both
+        of that frame's predicted depth to this one's (GuidedTrackerConfig.coast_scale_from_depth), when both
         are known."""
         then, dcf_then, output_then = self._last_tracked
         if not (self.config.coast_scale_from_depth and self._depth_known(then) and self._depth_known(prediction)):
@@ -195,7 +194,7 @@ class GuidedTracker:
         cfg, box = self.config, self.dcf.box
         centre_px = prediction.centre_px if _inside(prediction.centre_px, image_rgb) else box.center
         distance2 = self._gate_distance2(prediction)
-        step_px = cfg.reacquire_step_fraction * cfg.dcf.padding * np.array([box.w_px, box.h_px])
+        step_px = cfg.reacquire_step_fraction * self.dcf.config.padding * np.array([box.w_px, box.h_px])
         centre_response = self.dcf.response(image_rgb, centre_px, with_scale=False)
         ranked: list[tuple[float, bool, PeakChoice]] = []  # (log posterior, in the prediction's window, peak)
         for offset in self._reacquire_offsets:  # [0] is the prediction's window
@@ -216,7 +215,7 @@ class GuidedTracker:
 
     def _gate_distance2(self, prediction: PixelPrediction) -> Callable[[FloatArray], float]:
         """Squared Mahalanobis distance d^2 = r^T (C + s^2 I)^-1 r of a pixel from the prediction (see
-        PipelineConfig.reacquire_gate_chi2); 0 everywhere without a prediction."""
+        GuidedTrackerConfig.reacquire_gate_chi2); 0 everywhere without a prediction."""
         if not prediction.valid:
             return lambda location_px: 0.0
         box = self.dcf.box
@@ -247,7 +246,7 @@ class GuidedTracker:
         """Whether the trajectory prediction is offset from the constant-image-velocity one by more than
         `second_window_offset_fraction` of the search window along either axis."""
         box, fraction = self.dcf.box, self.config.second_window_offset_fraction
-        window = self.config.dcf.padding * np.array([box.w_px, box.h_px])
+        window = self.dcf.config.padding * np.array([box.w_px, box.h_px])
         return bool(np.any(np.abs(np.asarray(predicted_px) - motion_px) > fraction * window))
 
     def _refine_box(self, image_rgb: ImageRGB, dcf_box: BBox, learn: bool) -> BBox:

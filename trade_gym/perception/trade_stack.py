@@ -15,6 +15,7 @@ from trade.pipeline import Estimate, PipelineConfig, TradePipeline
 from trade.depth_alignment import sample_map
 from trade.raycast import raycast_plane
 from trade.single_image_depth import SingleImageDepth
+from trade.tracking.guided_config import GuidedTrackerConfig
 from trade.trajectory import TrajectoryModel, TrajectoryState
 from trade.types import BBox
 from trade_gym.config import EnvConfig
@@ -46,12 +47,12 @@ STACK_SWITCHES = ("temporal_fusion", "ground_mask", "single_image_depth", "depth
 def pipeline_config(config: EnvConfig) -> PipelineConfig:
     """The stack's configuration for an env configuration (its ablation switches)."""
     return PipelineConfig(
-        trajectory_guidance=config.trajectory_guidance and config.perception == "trade",
+        tracker=GuidedTrackerConfig(trajectory_guidance=config.trajectory_guidance and config.perception == "trade",
+                                    snap_initial_box=config.snap_init_box),
         temporal_fusion=config.temporal_fusion,
         ground_mask=config.ground_mask,
         single_image_depth=config.single_image_depth,
         depth_alignment_ransac=config.depth_only_ransac,
-        snap_initial_box=config.snap_init_box,
     )
 
 
@@ -123,7 +124,7 @@ class TradePerception:
         """Trajectory guidance on and the model's target position at this frame's time projects more than
         OUT_OF_VIEW_MARGIN_FRACTION of the image outside it, or lies behind the camera."""
         trajectory = self.pipeline.trajectory
-        if not (self.pipeline_config.trajectory_guidance and trajectory.initialized):
+        if not (self.pipeline_config.tracker.trajectory_guidance and trajectory.initialized):
             return False
         position = _predict_to(trajectory, sensors.t_s).position_m
         p_cam = sensors.T_world_cam.inverse().apply(position.reshape(1, 3))
