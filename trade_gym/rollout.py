@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.policy import Policy
+from trade_gym.policy import Policy
 from trade_gym.env import TradeFollowEnv
 
 
