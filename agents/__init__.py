@@ -5,7 +5,7 @@
 
 from typing import Any
 
-from agents.policy import Policy
+from trade_gym.policy import Policy
 from agents.scripted import ScriptedFollower, ScriptedFollowerConfig
 
 _LAZY = {"LearnedFollower": "agents.learned", "PolicyModelError": "agents.learned", "AgentError": "agents.learned"}

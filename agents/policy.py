@@ -1,17 +1,5 @@
-"""The policy protocol shared by scripted and learned followers (stable-baselines3's shape)."""
+"""The policy protocol shared by scripted and learned followers, defined in `trade_gym.policy` (re-exported)."""
 
-from __future__ import annotations
+from trade_gym.policy import Policy
 
-from typing import Any, Protocol
-
-import numpy as np
-
-
-class Policy(Protocol):
-    def predict(
-        self,
-        observation: dict[str, np.ndarray],
-        state: Any = None,
-        episode_start: np.ndarray | None = None,
-        deterministic: bool = True,
-    ) -> tuple[np.ndarray, Any]: ...
+__all__ = ["Policy"]

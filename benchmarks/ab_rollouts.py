@@ -21,7 +21,8 @@ from ab_speed import HERE, run_meta
 
 SCENES = ("desert", "city", "mountain")
 # Hashes every step's (obs, reward, terminated, truncated, info), keys sorted, new keys skipped; a reset seeded
-# seed + RESET_SEED_OFFSET follows an episode's end.
+# seed + RESET_SEED_OFFSET follows an episode's end. The probe runs on each tree's own code, a base from before
+# trade_gym.rollout's hooks too, so it keeps its own loop (across episodes, hashing rewards and flags as well).
 _PROBE = """
 import hashlib, json, sys
 import numpy as np

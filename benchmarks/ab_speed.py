@@ -19,7 +19,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parents[1]
 
-# One measurement: oracle mode, scripted follower, the CPU time spent inside env.step only.
+# One measurement: oracle mode, scripted follower, the CPU time spent inside env.step only. The probe runs on each
+# tree's own code, a base from before trade_gym.rollout's hooks too, so it keeps its own loop.
 _PROBE = """
 import json, sys, time, numpy as np
 from agents import ScriptedFollower

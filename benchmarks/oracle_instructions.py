@@ -19,7 +19,8 @@ from pathlib import Path
 
 from ab_speed import HERE, run_meta
 
-# The probe: reset, then `steps` steps of the scripted follower in oracle mode.
+# The probe: reset, then `steps` steps of the scripted follower in oracle mode. It runs on each tree's own code, a
+# base from before trade_gym.rollout's hooks too, so it keeps its own loop (and counts the same instructions).
 _PROBE = """
 import sys
 from agents import ScriptedFollower

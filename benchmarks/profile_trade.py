@@ -15,9 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
+from step_clock import StepClock  # benchmarks/ is on sys.path when this script runs
+
 from agents import ScriptedFollower
 from trade.pipeline import StageTimings
 from trade_gym.env import TradeFollowEnv
+from trade_gym.rollout import fly_episode
 
 PERCENTILES = (50, 90, 99)
 
@@ -34,25 +37,19 @@ def profile(scene: str, steps: int, camera_size: int, seed: int) -> dict:
         return frame
 
     env.camera.render = timed_render
-    policy = ScriptedFollower()
     stages: dict[str, list[float]] = {f.name: [] for f in fields(StageTimings)}
-    step_ms: list[float] = []
+
+    def read_stages(flown, obs, info) -> None:
+        timings = env.perception.last.timings
+        for name in stages:
+            stages[name].append(getattr(timings, name))
+
+    clock = StepClock(env)
     try:
-        obs, _ = env.reset(seed=seed)
-        first = True
-        for _ in range(steps):
-            action, _ = policy.predict(obs, episode_start=np.array([first]))
-            first = False
-            start = time.perf_counter()
-            obs, _, terminated, truncated, _ = env.step(action)
-            step_ms.append((time.perf_counter() - start) * 1e3)
-            timings = env.perception.last.timings
-            for name in stages:
-                stages[name].append(getattr(timings, name))
-            if terminated or truncated:
-                break
+        fly_episode(clock, ScriptedFollower(), seed, steps, on_step=read_stages)
     finally:
         env.close()
+    step_ms = [1e3 * s for s in clock.step_s]
     stack = np.sum([stages[n] for n in stages], axis=0)
     table = {name: _summary(v) for name, v in stages.items()}
     table["stack_total_ms"] = _summary(stack)

@@ -19,12 +19,12 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from agents import ScriptedFollower
+from trade_gym.config import CAMERA_RATE_HZ
 from trade_gym.env import TradeFollowEnv
 from trade_gym.provenance import cpu_model, git_commit
 from trade_gym.recording import RecordSequence
+from trade_gym.rollout import fly_episode
 
 LAYERS = {"rgb": {}, "rgb+depth+seg": {"depth": True, "seg": True}}
 SEED = 0  # development world 0
@@ -60,16 +60,10 @@ class TimedRecord(RecordSequence):
 
 
 def measure(scene: str, camera_size: int, steps: int, root: Path, layers: dict[str, bool]) -> dict[str, float]:
-    env = TimedRecord(TradeFollowEnv(scene=scene, camera_size=camera_size, episode_duration_s=steps / 30), root,
+    env = TimedRecord(TradeFollowEnv(scene=scene, camera_size=camera_size, episode_duration_s=steps / CAMERA_RATE_HZ), root,
                       **layers)
-    policy = ScriptedFollower()
     try:
-        obs, _ = env.reset(seed=SEED)
-        for k in range(steps):
-            action, _ = policy.predict(obs, episode_start=np.array([k == 0]))
-            obs, _, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
-                break
+        fly_episode(env, ScriptedFollower(), SEED, steps)
     finally:
         env.close()
     sequence = env.written[0]

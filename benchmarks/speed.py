@@ -17,45 +17,26 @@ from pathlib import Path
 
 import numpy as np
 
+from step_clock import StepClock  # benchmarks/ is on sys.path when this script runs
+
 from agents import ScriptedFollower
+from trade_gym.bench.policies import HoverPolicy
 from trade_gym.env import TradeFollowEnv
-
-
-class Hover:
-    """Zero action: the drone hovers and the target soon leaves the view."""
-
-    def predict(self, obs, state=None, episode_start=None, deterministic=True):
-        return np.zeros(4, np.float32), state
+from trade_gym.rollout import fly_episode
 
 
 def _steps_per_s(env: TradeFollowEnv, n_steps: int, seed: int,
                  policy_name: str = "scripted") -> tuple[float, float, float]:
     """(env.step calls per wall-clock second, per CPU second of this process, mean reset time [ms])
-    under the named policy; with the scripted follower episodes run their full length; only the time
-    inside step() and reset() is counted. CPU time excludes the VM's steal time, which makes
-    wall-clock rates vary by +-30 % on a shared host."""
-    policy = ScriptedFollower() if policy_name == "scripted" else Hover()
-    step_s = reset_s = step_cpu_s = 0.0
-    resets = 0
-    start = time.perf_counter()
-    obs, _ = env.reset(seed=seed)
-    reset_s += time.perf_counter() - start
-    resets += 1
-    first = True
-    for _ in range(n_steps):
-        action, _ = policy.predict(obs, episode_start=np.array([first]))
-        first = False
-        start, start_cpu = time.perf_counter(), time.process_time()
-        obs, _, terminated, truncated, _ = env.step(action)
-        step_s += time.perf_counter() - start
-        step_cpu_s += time.process_time() - start_cpu
-        if terminated or truncated:
-            start = time.perf_counter()
-            obs, _ = env.reset(seed=seed + resets)
-            reset_s += time.perf_counter() - start
-            resets += 1
-            first = True
-    return n_steps / step_s, n_steps / step_cpu_s, reset_s / resets * 1e3
+    under the named policy (hover: the zero action, the target soon leaves the view); with the scripted
+    follower episodes run their full length, the k-th reset seeded seed + k; only the time inside step()
+    and reset() is counted. CPU time excludes the VM's steal time, which makes wall-clock rates vary by
+    +-30 % on a shared host."""
+    policy = ScriptedFollower() if policy_name == "scripted" else HoverPolicy()
+    clock = StepClock(env)
+    while len(clock.step_s) < n_steps:
+        fly_episode(clock, policy, seed + len(clock.reset_s), n_steps - len(clock.step_s))
+    return n_steps / sum(clock.step_s), n_steps / sum(clock.step_cpu_s), float(np.mean(clock.reset_s)) * 1e3
 
 
 def _render_ms(env: TradeFollowEnv, n_frames: int, seed: int) -> float:

@@ -6,6 +6,8 @@ Frames: world z up; camera OpenCV (x right, y down, z along the optical axis).
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -137,7 +139,7 @@ def project_world(K: CameraIntrinsics, T_world_cam: Pose, points_world: FloatArr
 
 
 def quat_xyzw_to_matrix(q: FloatArray) -> FloatArray:
-    """Unit quaternion (x, y, z, w) -> 3x3 rotation matrix."""
+    """Unit quaternion (x, y, z, w) -> 3x3 rotation matrix (the inverse of `matrix_to_quat_xyzw`)."""
     x, y, z, w = (float(c) for c in q)
     return np.array(
         [
@@ -146,6 +148,28 @@ def quat_xyzw_to_matrix(q: FloatArray) -> FloatArray:
             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
         ]
     )
+
+
+def matrix_to_quat_xyzw(R_rowmajor: Sequence[float]) -> tuple[float, float, float, float]:
+    """Rotation given by its 9 entries row-major (`R.ravel()`, or pybullet's matrix layout) -> unit quaternion
+    (x, y, z, w), Shepperd's method: from the trace when it is positive, else from the largest diagonal entry.
+    Plain floats: it places the scene's vehicles every rendered frame, where numpy's per-call cost dominates."""
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = R_rowmajor
+    tr = m00 + m11 + m22
+    if tr > 0.0:
+        r = 2.0 * math.sqrt(tr + 1.0)
+        q = ((m21 - m12) / r, (m02 - m20) / r, (m10 - m01) / r, 0.25 * r)
+    elif m00 >= m11 and m00 >= m22:
+        r = 2.0 * math.sqrt(1.0 + m00 - m11 - m22)
+        q = (0.25 * r, (m01 + m10) / r, (m02 + m20) / r, (m21 - m12) / r)
+    elif m11 >= m22:
+        r = 2.0 * math.sqrt(1.0 + m11 - m22 - m00)
+        q = ((m01 + m10) / r, 0.25 * r, (m12 + m21) / r, (m02 - m20) / r)
+    else:
+        r = 2.0 * math.sqrt(1.0 + m22 - m00 - m11)
+        q = ((m02 + m20) / r, (m12 + m21) / r, 0.25 * r, (m10 - m01) / r)
+    inv = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return q[0] * inv, q[1] * inv, q[2] * inv, q[3] * inv
 
 
 def rotation_z(yaw_rad: float) -> FloatArray:

@@ -24,6 +24,7 @@ from trade.types import BBox, ImuBatch
 from trade_gym.faults import Fault, FaultSchedule, SensorFaults
 from trade_gym.perception.base import SensorFrame
 from trade_gym.perception.trade_stack import unusable_frame
+from trade_gym.rollout import fly_episode
 
 TRACKED_IOU = 0.3
 REACQUIRE_FRAMES = 10
@@ -60,15 +61,13 @@ class Frame:
 def run_episode(schedule: FaultSchedule, seed: int, steps: int, **env_kwargs) -> list[Frame]:
     """Fly the scripted follower through `steps` frames of a SensorFaults-wrapped env (or until it ends)."""
     env = SensorFaults(gym.make("TradeFollow-v0", **env_kwargs), schedule)
-    policy, frames = ScriptedFollower(), []
+    frames: list[Frame] = []
+
+    def record(flown, obs, info):  # frame k = 1, 2, ... after the k-th step
+        frames.append(_frame(len(frames) + 1, flown, obs, info))
+
     try:
-        obs, info = env.reset(seed=seed)
-        for k in range(1, steps + 1):
-            action, _ = policy.predict(obs, episode_start=np.array([k == 1]))
-            obs, _, terminated, truncated, info = env.step(action)
-            frames.append(_frame(k, env, obs, info))
-            if terminated or truncated:
-                break
+        fly_episode(env, ScriptedFollower(), seed, steps, on_step=record)
     finally:
         env.close()
     return frames

@@ -24,6 +24,7 @@ from trade.single_image_depth import SingleImageDepth
 from trade.types import BBox
 from trade_gym.env import TradeFollowEnv
 from trade_gym.ground_truth import segmentation_boxes
+from trade_gym.rollout import fly_episode
 
 MIN_MEAN_IOU = 0.8
 BUILDING_MIN_FRACTION = 0.02  # of the ROI crop
@@ -52,13 +53,8 @@ def crop_scores(mask: np.ndarray, seg: np.ndarray, roi: BBox, env: TradeFollowEn
 
 def oracle_flight(env: TradeFollowEnv, seed: int, steps: int) -> list[tuple[float, np.ndarray]]:
     """(t [s], drone position (3,) world [m]) of a scripted flight with oracle perception (no rendering)."""
-    obs, _ = env.reset(seed=seed)
-    policy, flight = ScriptedFollower(), []
-    for step in range(steps):
-        action, _ = policy.predict(obs, episode_start=np.array([step == 0]))
-        obs, _, _, _, info = env.step(action)
-        flight.append((info["t_s"], info["drone_position_m"].copy()))
-    return flight
+    infos = fly_episode(env, ScriptedFollower(), seed, steps)
+    return [(info["t_s"], info["drone_position_m"].copy()) for info in infos]
 
 
 def mask_on_rendered_frame(env: TradeFollowEnv, ground_filter: GroundFilter, t_s: float, position_m: np.ndarray,
@@ -133,25 +129,25 @@ def test_ground_mask_city_closed_loop_frames_with_building_in_roi_mean_iou_at_le
     ground filter ran the model and kept a new mask is scored against the segmentation rendered from the same
     pose at the same instant."""
     env = TradeFollowEnv(scene="city", ground_mask=True, pose_source="gt", camera_size=256)
-    policy = ScriptedFollower()
-    scores = []
+    scores, recorder, n_runs = [], None, 0
+
+    def wrap_ground_filter(flown, obs, info):
+        nonlocal recorder
+        pipeline = flown.perception.pipeline
+        recorder = pipeline.ground = _RecordingFilter(pipeline.ground)
+
+    def score_fresh_mask(flown, obs, info):  # the model runs at most once a frame
+        nonlocal n_runs
+        if len(recorder.runs) > n_runs:
+            labels, roi, T_world_cam = recorder.runs[-1]
+            if labels.mask is not None and (n_runs == 0 or labels.mask is not recorder.runs[-2][0].mask):
+                seg = flown.camera.render(T_world_cam).seg
+                scores.append(crop_scores(labels.mask.mask, seg, roi.roi, flown))
+        n_runs = len(recorder.runs)
+
     try:
-        obs, _ = env.reset(seed=seed)
-        pipeline = env.perception.pipeline
-        recorder = _RecordingFilter(pipeline.ground)
-        pipeline.ground = recorder
-        for step in range(CLOSED_LOOP_STEPS):
-            action, _ = policy.predict(obs, episode_start=np.array([step == 0]))
-            n_runs = len(recorder.runs)
-            obs, _, terminated, truncated, _ = env.step(action)
-            if len(recorder.runs) > n_runs:
-                labels, roi, T_world_cam = recorder.runs[-1]
-                fresh = labels.mask is not None and (n_runs == 0 or labels.mask is not recorder.runs[-2][0].mask)
-                if fresh:
-                    seg = env.camera.render(T_world_cam).seg
-                    scores.append(crop_scores(labels.mask.mask, seg, roi.roi, env))
-            if terminated or truncated:
-                break
+        fly_episode(env, ScriptedFollower(), seed, CLOSED_LOOP_STEPS, on_reset=wrap_ground_filter,
+                    on_step=score_fresh_mask)
     finally:
         env.close()
     ious = np.array([iou for iou, building in scores if building >= BUILDING_MIN_FRACTION])

@@ -28,6 +28,7 @@ from trade_gym.recording.cli import main as replay_main
 from trade_gym.recording.format import load_schema
 from trade_gym.recording.reader import open_sequence
 from trade_gym.recording.replay import recorded_settings, replay
+from trade_gym.rollout import fly_episode
 
 SEED = 2  # development world 2
 STEPS = 100
@@ -52,22 +53,14 @@ class ClosedLoop:
 
 
 def _fly(env, base: TradeFollowEnv) -> tuple[list, list[dict]]:
-    policy, per_frame, infos = ScriptedFollower(), [], []
+    per_frame = []
 
-    def grab(info):
+    def grab(flown, obs, info):
         per_frame.append((info["est_bbox"].copy(), bool(info["est_valid"]),
                           (info["target_depth_est"], info["ground_depth_est"]), base.perception.last.plane,
                           base.delivered_sensors.rgb))
 
-    obs, info = env.reset(seed=SEED)
-    grab(info)
-    for k in range(STEPS):
-        action, _ = policy.predict(obs, episode_start=np.array([k == 0]))
-        obs, _, terminated, truncated, info = env.step(action)
-        grab(info)
-        infos.append(info)
-        if terminated or truncated:
-            break
+    infos = fly_episode(env, ScriptedFollower(), SEED, STEPS, on_reset=grab, on_step=grab)
     return per_frame, infos
 
 

@@ -8,22 +8,13 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from trade.geometry import CameraIntrinsics, Pose, project_world, rotation_z
+from trade.geometry import CameraIntrinsics, Pose, matrix_to_quat_xyzw, project_world, rotation_z
 from trade_gym.sim.camera import Camera, CameraConfig, mount_rotation
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import VioConfig, VioPoseSource, make_pose_source
 
 PHYSICS_DT_S = 1.0 / 240.0
 STEPS_PER_FRAME = 8
-
-
-def _quat_xyzw(R: np.ndarray) -> list[float]:
-    """Rotation matrix -> unit quaternion (x, y, z, w)."""
-    w = math.sqrt(max(0.0, 1.0 + R[0, 0] + R[1, 1] + R[2, 2])) / 2.0
-    x = math.copysign(math.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2.0, R[2, 1] - R[1, 2])
-    y = math.copysign(math.sqrt(max(0.0, 1.0 - R[0, 0] + R[1, 1] - R[2, 2])) / 2.0, R[0, 2] - R[2, 0])
-    z = math.copysign(math.sqrt(max(0.0, 1.0 - R[0, 0] - R[1, 1] + R[2, 2])) / 2.0, R[1, 0] - R[0, 1])
-    return [x, y, z, w]
 
 
 @pytest.fixture()
@@ -82,7 +73,7 @@ def test_camera_render_marker_centroid_within_half_px_of_intrinsics_projection(
         # a thin disc facing the camera: its image is a disc centred on the projection of its centre
         vis = p.createVisualShape(p.GEOM_CYLINDER, radius=radius_px * depth / K.fx_px, length=0.005,
                                   rgbaColor=[1, 1, 1, 1], physicsClientId=client)
-        ids.append(p.createMultiBody(0, -1, vis, centre.tolist(), _quat_xyzw(T_world_cam.R),
+        ids.append(p.createMultiBody(0, -1, vis, centre.tolist(), matrix_to_quat_xyzw(T_world_cam.R.ravel()),
                                      physicsClientId=client))
     frame = cam.render(T_world_cam)
     assert frame.rgb.shape == (height_px, width_px, 3) and frame.rgb.dtype == np.uint8

@@ -14,7 +14,7 @@ from trade_gym.sim.meshes import rock_mesh
 from trade_gym.sim.scenes import DECOY_NEAR_PATH_M, SCENES, SceneSpec, get_scene
 from trade_gym.sim.spline import CatmullRomSpline
 from trade_gym.sim.terrain import distance_to_path
-from trade_gym.sim.vehicles import matrix_to_quat_xyzw, terrain_pose
+from trade_gym.sim.vehicles import terrain_pose
 from trade_gym.sim.world import World, build_world, make_layout
 
 FOV_DEG = 110.0
@@ -86,14 +86,6 @@ def test_spline_arc_length_parametrisation_moves_one_metre_per_metre():
     d, _ = spline.closest(np.array([[10.0, 0.0], [20.0, 8.0]]))
     assert np.all(d < 1e-2)  # passes through its control points
     np.testing.assert_allclose(CatmullRomSpline([[0.0, 0.0], [0.0, 5.0]]).heading_rad(2.0), np.pi / 2)
-
-
-def test_matrix_to_quat_round_trip_recovers_rotation():
-    rng = np.random.default_rng(3)
-    for _ in range(20):
-        q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-        R = q * np.sign(np.linalg.det(q))
-        np.testing.assert_allclose(quat_xyzw_to_matrix(matrix_to_quat_xyzw(R)), R, atol=1e-12)
 
 
 @pytest.mark.parametrize("scene", sorted(SCENES))

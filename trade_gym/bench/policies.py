@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from agents import ScriptedFollower, ScriptedFollowerConfig
-from agents.policy import Policy
+from trade_gym.policy import Policy
 
 ACTION_DIM = 4  # TradeFollow-v0's action: (forward, left, up, yaw rate) in [-1, 1]
 ACTION_LOW, ACTION_HIGH = -1.0, 1.0

@@ -26,6 +26,7 @@ from trade_gym import metrics  # noqa: E402  (after the quiet pybullet import)
 from trade_gym.bench.policies import make_policy  # noqa: E402
 from trade_gym.bench.suites import RunSpec  # noqa: E402
 from trade_gym.env import TradeFollowEnv  # noqa: E402
+from trade_gym.rollout import FrameHook, fly_episode  # noqa: E402
 
 if TYPE_CHECKING:
     from trade_gym.bench.executors import Executor
@@ -106,36 +107,31 @@ def error_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
 
 
-def fly(spec: RunSpec, on_frame: Callable[[TradeFollowEnv], None] | None = None,
+def fly(spec: RunSpec, on_frame: FrameHook | None = None,
         render: bool = False, record_root: Path | None = None) -> tuple[list[dict], RunTiming]:
-    """Fly one episode of `spec`; `on_frame(env)` after reset and every step (e.g. to record video). With
-    `record_root` the episode is also written as a sequence to `record_root/<run id>/episode_0000/`."""
+    """Fly one episode of `spec` (`trade_gym.rollout.fly_episode`); `on_frame(env, obs, info)` after reset and
+    every step (e.g. to record video). With `record_root` the episode is also written as a sequence to
+    `record_root/<run id>/episode_0000/`."""
     start = time.perf_counter()
     kwargs = spec.env_kwargs() | ({"render_mode": "rgb_array"} if render else {})
     base = env = TradeFollowEnv(**kwargs)
-    infos: list[dict] = []
+    loop_start: list[float] = []  # when the reset returned
+
+    def reset_done(flown: gym.Env, obs: dict, info: dict) -> None:
+        loop_start.append(time.perf_counter())
+        if on_frame is not None:
+            on_frame(flown, obs, info)
+
     try:
         if record_root is not None:
             env = _recording(base, record_root / spec.run_id)
         policy = make_policy(spec.policy, spec.seed, base.config.camera_pitch_deg)
         reset_start = time.perf_counter()
-        obs, _ = env.reset(seed=spec.seed)
-        loop_start = time.perf_counter()
-        if on_frame is not None:
-            on_frame(env)
-        first, done = True, False
-        while not done and len(infos) < spec.steps:
-            action, _ = policy.predict(obs, episode_start=np.array([first]))
-            first = False
-            obs, _, terminated, truncated, info = env.step(action)
-            infos.append(info)
-            done = terminated or truncated
-            if on_frame is not None:
-                on_frame(env)
-        loop_s = time.perf_counter() - loop_start
+        infos = fly_episode(env, policy, spec.seed, spec.steps, on_reset=reset_done, on_step=on_frame)
+        loop_s = time.perf_counter() - loop_start[0]
     finally:
         env.close()
-    timing = RunTiming(time.perf_counter() - start, loop_start - reset_start, loop_s,
+    timing = RunTiming(time.perf_counter() - start, loop_start[0] - reset_start, loop_s,
                        metrics.steps_per_second(len(infos), loop_s))
     return infos, timing
 

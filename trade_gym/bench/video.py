@@ -7,12 +7,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import cv2
+import gymnasium as gym
 import numpy as np
 
 from trade_gym.bench.runner import fly
 from trade_gym.bench.suites import RunSpec
 from trade_gym.config import CAMERA_RATE_HZ
-from trade_gym.env import TradeFollowEnv
 
 MP4_FOURCC = "mp4v"
 GIF_FRAME_STRIDE = 3  # GIF fallback keeps every 3rd frame (10 fps) to stay small
@@ -26,7 +26,7 @@ def record_video(spec: RunSpec, out_stem: Path) -> Path:
     its ground truth, so the benchmark's metrics never come from this pass."""
     frames: list[np.ndarray] = []
 
-    def grab(env: TradeFollowEnv) -> None:
+    def grab(env: gym.Env, obs: dict, info: dict) -> None:
         frames.append(env.render())
 
     fly(spec, on_frame=grab, render=True)

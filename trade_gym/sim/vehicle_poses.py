@@ -11,6 +11,7 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
+from trade.geometry import matrix_to_quat_xyzw
 from trade_gym.sim.terrain import Heightfield
 from trade_gym.sim.vehicles import Vehicle
 
@@ -40,26 +41,6 @@ def pose_at(terrain: Heightfield, v: Vehicle, t_s: float) -> Pose12:
     ax, ay, az = c * inv, s * inv, pitch * inv
     bx, by, bz = ny * az - nz * ay, nz * ax - nx * az, nx * ay - ny * ax  # n x x_axis
     return (x + hz * nx, y + hz * ny, h(x, y) + hz * nz, ax, bx, nx, ay, by, ny, az, bz, nz)
-
-
-def quat_xyzw_at(pose: Pose12) -> tuple[float, float, float, float]:
-    """Unit quaternion (x, y, z, w) of the pose's rotation, Shepperd's method (as `vehicles.matrix_to_quat_xyzw`)."""
-    _, _, _, m00, m01, m02, m10, m11, m12, m20, m21, m22 = pose
-    tr = m00 + m11 + m22
-    if tr > 0.0:
-        r = 2.0 * math.sqrt(tr + 1.0)
-        q = ((m21 - m12) / r, (m02 - m20) / r, (m10 - m01) / r, 0.25 * r)
-    elif m00 >= m11 and m00 >= m22:
-        r = 2.0 * math.sqrt(1.0 + m00 - m11 - m22)
-        q = (0.25 * r, (m01 + m10) / r, (m02 + m20) / r, (m21 - m12) / r)
-    elif m11 >= m22:
-        r = 2.0 * math.sqrt(1.0 + m11 - m22 - m00)
-        q = ((m01 + m10) / r, 0.25 * r, (m12 + m21) / r, (m02 - m20) / r)
-    else:
-        r = 2.0 * math.sqrt(1.0 + m22 - m00 - m11)
-        q = ((m02 + m20) / r, (m12 + m21) / r, 0.25 * r, (m10 - m01) / r)
-    inv = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    return q[0] * inv, q[1] * inv, q[2] * inv, q[3] * inv
 
 
 def _arrays(pose: Pose12) -> tuple[FloatArray, FloatArray]:
@@ -108,7 +89,8 @@ class VehiclePoses:
     def place_bodies(self) -> None:
         """Move the pybullet bodies to the latest poses (before rendering)."""
         for body_id, pose in self._unplaced.items():
-            p.resetBasePositionAndOrientation(body_id, pose[:3], quat_xyzw_at(pose), physicsClientId=self.client_id)
+            p.resetBasePositionAndOrientation(body_id, pose[:3], matrix_to_quat_xyzw(pose[3:]),
+                                              physicsClientId=self.client_id)
         self._unplaced.clear()
 
     def pose(self, v: Vehicle, t_s: float) -> tuple[FloatArray, FloatArray]:

@@ -173,23 +173,6 @@ def terrain_pose(
     return np.column_stack([xy, z[:, 4]]) + half[:, 2:3] * n, R
 
 
-def matrix_to_quat_xyzw(R: npt.ArrayLike) -> FloatArray:
-    """3x3 rotation -> unit quaternion (x, y, z, w), Shepperd's method."""
-    m = np.asarray(R, dtype=np.float64)
-    tr = np.trace(m)
-    if tr > 0.0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s]
-    else:
-        k = int(np.argmax(np.diag(m)))
-        i, j = (k + 1) % 3, (k + 2) % 3
-        s = 2.0 * np.sqrt(1.0 + m[k, k] - m[i, i] - m[j, j])
-        q = [0.0, 0.0, 0.0, (m[j, i] - m[i, j]) / s]
-        q[k], q[i], q[j] = 0.25 * s, (m[i, k] + m[k, i]) / s, (m[j, k] + m[k, j]) / s
-    q = np.asarray(q)
-    return q / np.linalg.norm(q)
-
-
 def create_vehicle_shape(client_id: int, kind: str) -> int:
     """Visual shape id for `kind` (create once per reset, share between identical vehicles)."""
     return vehicle_model(kind).mesh.create_visual_shape(client_id)
