@@ -265,6 +265,11 @@ class TradeFollowEnv(gym.Env):
         return self._last_truth
 
     @property
+    def estimate(self) -> PerceptionOutput:
+        """The estimate the current observation holds (after any perception latency)."""
+        return self._last_estimate
+
+    @property
     def camera_frame(self) -> CameraFrame | None:
         """The current frame as rendered (true image, depth and segmentation); None when nothing was rendered."""
         return self._last_frame
