@@ -11,6 +11,9 @@ from typing import Any
 
 import numpy as np
 
+from trade.validation import require
+from trade_gym.config import CAMERA_PITCH_RANGE_DEG, EnvConfig
+
 # Action scale of TradeFollow-v0 (QuadrotorConfig limits): m/s per unit action.
 DEFAULT_MAX_SPEED_HORIZONTAL_MPS = 8.0
 DEFAULT_MAX_SPEED_VERTICAL_MPS = 3.0
@@ -24,7 +27,7 @@ class ScriptedFollowerConfig:
     image_gain_mps: float = 6.0  # before a 3D estimate exists: speed per half-image offset of the box
     height_gain_per_s: float = 0.6
     velocity_feedforward: float = 1.0
-    camera_pitch_deg: float = 90.0
+    camera_pitch_deg: float = EnvConfig.camera_pitch_deg  # must match the env's
     max_speed_horizontal_mps: float = DEFAULT_MAX_SPEED_HORIZONTAL_MPS
     max_speed_vertical_mps: float = DEFAULT_MAX_SPEED_VERTICAL_MPS
 
@@ -32,10 +35,10 @@ class ScriptedFollowerConfig:
         for name in ("position_gain_per_s", "height_gain_per_s", "image_gain_mps", "max_speed_horizontal_mps",
                      "max_speed_vertical_mps"):
             value = getattr(self, name)
-            if not np.isfinite(value) or value <= 0:
-                raise ValueError(f"ScriptedFollowerConfig.{name} must be > 0, got {value!r}")
-        if not 30.0 <= self.camera_pitch_deg <= 90.0:
-            raise ValueError(f"camera_pitch_deg must be in [30, 90], got {self.camera_pitch_deg!r}")
+            require(np.isfinite(value) and value > 0, f"ScriptedFollowerConfig.{name}", value, "> 0")
+        low, high = CAMERA_PITCH_RANGE_DEG
+        require(low <= self.camera_pitch_deg <= high, "ScriptedFollowerConfig.camera_pitch_deg", self.camera_pitch_deg,
+                f"in [{low}, {high}] (the env's range)")
 
 
 class ScriptedFollower:

@@ -6,10 +6,10 @@ an error naming the parameter and the value.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
+from trade.validation import check_choice, check_non_negative, check_positive, check_range, is_int_at_least, require
 from trade_gym.reward import RewardConfig
 
 PERCEPTION_MODES = ("trade", "dcf", "oracle")
@@ -23,6 +23,9 @@ MS_PER_S = 1000.0
 
 PHYSICS_RATE_HZ = 240
 CAMERA_RATE_HZ = 30
+MIN_CAMERA_SIZE_PX = 16
+CAMERA_FOV_RANGE_DEG = (10.0, 170.0)
+CAMERA_PITCH_RANGE_DEG = (30.0, 90.0)  # 90 = straight down
 
 
 @dataclass(frozen=True)
@@ -77,32 +80,31 @@ class EnvConfig:
             object.__setattr__(self, "reward", RewardConfig(**self.reward))
         if not isinstance(self.reward, RewardConfig):
             raise ValueError(f"reward must be a RewardConfig or a mapping of its fields, got {self.reward!r}")
-        _check_choice("scene", self.scene, SCENE_NAMES)
-        _check_choice("perception", self.perception, PERCEPTION_MODES)
-        _check_choice("pose_source", self.pose_source, POSE_SOURCES)
-        _check_choice("render_mode", self.render_mode, RENDER_MODES)
+        check_choice("scene", self.scene, SCENE_NAMES)
+        check_choice("perception", self.perception, PERCEPTION_MODES)
+        check_choice("pose_source", self.pose_source, POSE_SOURCES)
+        check_choice("render_mode", self.render_mode, RENDER_MODES)
         _check_latency(self.perception_latency, self.perception_latency_ms)
-        if isinstance(self.camera_size, bool) or not isinstance(self.camera_size, int) or self.camera_size < 16:
-            raise ValueError(f"camera_size must be an integer >= 16 [px], got {self.camera_size!r}")
-        _check_range("camera_fov_deg", self.camera_fov_deg, 10.0, 170.0)
-        _check_range("camera_pitch_deg", self.camera_pitch_deg, 30.0, 90.0)
+        require(is_int_at_least(self.camera_size, MIN_CAMERA_SIZE_PX, numpy_ints=False), "camera_size",
+                self.camera_size, f"an integer >= {MIN_CAMERA_SIZE_PX} [px]")
+        check_range("camera_fov_deg", self.camera_fov_deg, *CAMERA_FOV_RANGE_DEG)
+        check_range("camera_pitch_deg", self.camera_pitch_deg, *CAMERA_PITCH_RANGE_DEG)
         if self.target_speed_mps is not None:
-            _check_positive("target_speed_mps", self.target_speed_mps)
+            check_positive("target_speed_mps", self.target_speed_mps)
         for name in ("episode_duration_s", "lost_timeout_s"):
-            _check_positive(name, getattr(self, name))
-        _check_range("visible_fraction_threshold", self.visible_fraction_threshold, 0.0, 1.0)
+            check_positive(name, getattr(self, name))
+        check_range("visible_fraction_threshold", self.visible_fraction_threshold, 0.0, 1.0)
         for name in ("init_box_perturb_px", "oracle_box_sigma_px", "oracle_depth_sigma_frac",
                      "oracle_velocity_sigma_mps", "oracle_noise_correlation_s", "oracle_first_fix_delay_s"):
-            _check_non_negative(name, getattr(self, name))
-        _check_range("oracle_dropout_prob", self.oracle_dropout_prob, 0.0, 1.0)
-        if self.world_seed is not None and (isinstance(self.world_seed, bool) or not isinstance(self.world_seed, int)
-                                            or self.world_seed < 0):
-            raise ValueError(f"world_seed must be None or an integer >= 0, got {self.world_seed!r}")
-        if not isinstance(self.init_frame_shift_max, int) or self.init_frame_shift_max < 0:
-            raise ValueError(f"init_frame_shift_max must be an integer >= 0, got {self.init_frame_shift_max!r}")
+            check_non_negative(name, getattr(self, name))
+        check_range("oracle_dropout_prob", self.oracle_dropout_prob, 0.0, 1.0)
+        require(self.world_seed is None or is_int_at_least(self.world_seed, 0, numpy_ints=False), "world_seed",
+                self.world_seed, "None or an integer >= 0")
+        require(is_int_at_least(self.init_frame_shift_max, 0, numpy_ints=False), "init_frame_shift_max",
+                self.init_frame_shift_max, "an integer >= 0")
         for f in fields(self):
-            if f.type == "bool" and not isinstance(getattr(self, f.name), bool):
-                raise ValueError(f"{f.name} must be a bool, got {getattr(self, f.name)!r}")
+            if f.type == "bool":
+                require(isinstance(getattr(self, f.name), bool), f.name, getattr(self, f.name), "a bool")
 
     @property
     def physics_steps_per_frame(self) -> int:
@@ -127,13 +129,8 @@ class EnvConfig:
         return self.perception != "oracle" or self.render_mode is not None or self.render_oracle_frames
 
 
-def _check_choice(name: str, value: object, choices: tuple) -> None:
-    if value not in choices:
-        raise ValueError(f"{name} must be one of {choices}, got {value!r}")
-
-
 def _check_latency(mode: object, latency_ms: object) -> None:
-    _check_choice("perception_latency", mode, LATENCY_MODES)
+    check_choice("perception_latency", mode, LATENCY_MODES)
     if mode != "fixed":
         if latency_ms is not None:
             raise ValueError(f"perception_latency_ms is only used with perception_latency='fixed', got "
@@ -141,26 +138,4 @@ def _check_latency(mode: object, latency_ms: object) -> None:
         return
     if latency_ms is None:
         raise ValueError("perception_latency='fixed' needs perception_latency_ms (a number >= 0 [ms]), got None")
-    _check_non_negative("perception_latency_ms", latency_ms)
-
-
-def _check_finite_number(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    return float(value)
-
-
-def _check_positive(name: str, value: object) -> None:
-    if _check_finite_number(name, value) <= 0.0:
-        raise ValueError(f"{name} must be > 0, got {value!r}")
-
-
-def _check_non_negative(name: str, value: object) -> None:
-    if _check_finite_number(name, value) < 0.0:
-        raise ValueError(f"{name} must be >= 0, got {value!r}")
-
-
-def _check_range(name: str, value: object, low: float, high: float) -> None:
-    v = _check_finite_number(name, value)
-    if not low <= v <= high:
-        raise ValueError(f"{name} must be in [{low}, {high}], got {value!r}")
+    check_non_negative("perception_latency_ms", latency_ms)

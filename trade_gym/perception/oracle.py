@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trade.geometry import Pose
+from trade.validation import require
 from trade_gym.ground_truth import GroundTruth
 from trade_gym.perception.base import FloatArray, PerceptionOutput, SensorFrame
 
@@ -39,10 +40,8 @@ class OracleConfig:
         for name in ("box_sigma_px", "depth_sigma_frac", "velocity_sigma_mps", "noise_correlation_s",
                      "first_fix_delay_s"):
             value = getattr(self, name)
-            if not np.isfinite(value) or value < 0:
-                raise ValueError(f"OracleConfig.{name} must be finite and >= 0, got {value!r}")
-        if not 0.0 <= self.dropout_prob <= 1.0:
-            raise ValueError(f"OracleConfig.dropout_prob must be in [0, 1], got {self.dropout_prob!r}")
+            require(0.0 <= value < math.inf, f"OracleConfig.{name}", value, "finite and >= 0")
+        require(0.0 <= self.dropout_prob <= 1.0, "OracleConfig.dropout_prob", self.dropout_prob, "in [0, 1]")
 
 
 class OraclePerception:

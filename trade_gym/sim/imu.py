@@ -13,6 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from trade.types import ImuBatch
+from trade.validation import require
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -48,8 +49,7 @@ class ImuConfig:
     enabled: bool = True  # noise and bias on
 
     def __post_init__(self) -> None:
-        if not math.isfinite(self.rate_hz) or self.rate_hz <= 0:
-            raise ValueError(f"ImuConfig.rate_hz must be finite and > 0, got {self.rate_hz!r}")
+        require(0.0 < self.rate_hz < math.inf, "ImuConfig.rate_hz", self.rate_hz, "finite and > 0")
         non_negative = (
             "accel_noise_density_mps2_per_rthz", "gyro_noise_density_radps_per_rthz",
             "accel_bias_random_walk_mps3_per_rthz", "gyro_bias_random_walk_radps2_per_rthz",
@@ -57,8 +57,7 @@ class ImuConfig:
         )
         for name in non_negative:
             value = getattr(self, name)
-            if not math.isfinite(value) or value < 0:
-                raise ValueError(f"ImuConfig.{name} must be finite and >= 0, got {value!r}")
+            require(0.0 <= value < math.inf, f"ImuConfig.{name}", value, "finite and >= 0")
 
     @property
     def period_s(self) -> float:

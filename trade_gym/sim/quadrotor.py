@@ -13,6 +13,8 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
+from trade.validation import require
+
 FloatArray = npt.NDArray[np.float64]
 
 _BODY_LINK = -1  # pybullet link index of a multibody's base
@@ -53,24 +55,21 @@ class QuadrotorConfig:
     max_yaw_lead_rad: float = 0.5  # yaw setpoint may run at most this far ahead of the yaw
 
     def __post_init__(self) -> None:
+        c = "QuadrotorConfig"
         for name in ("inertia_kgm2", "half_extents_m"):
             value = getattr(self, name)
-            _require(len(value) == 3 and all(math.isfinite(v) and v > 0 for v in value), name, value,
-                     "three finite values > 0")
+            require(len(value) == 3 and all(math.isfinite(v) and v > 0 for v in value), f"{c}.{name}", value,
+                    "three finite values > 0")
+            object.__setattr__(self, name, tuple(value))  # a list from a mapping (JSON) becomes the tuple
         for name in _POSITIVE_FIELDS:
             value = getattr(self, name)
-            _require(math.isfinite(value) and value > 0, name, value, "finite and > 0")
-        _require(0.0 < self.max_tilt_deg < 90.0, "max_tilt_deg", self.max_tilt_deg, "in (0, 90)")
-        _require(0.0 <= self.tilt_margin_deg < self.max_tilt_deg, "tilt_margin_deg", self.tilt_margin_deg,
-                 "in [0, max_tilt_deg)")
-        _require(0.0 < self.min_thrust_to_weight < 1.0, "min_thrust_to_weight", self.min_thrust_to_weight,
-                 "in (0, 1)")
-        _require(self.max_thrust_to_weight > 1.0, "max_thrust_to_weight", self.max_thrust_to_weight, "> 1")
-
-
-def _require(ok: bool, name: str, value: object, requirement: str) -> None:
-    if not ok:
-        raise ValueError(f"QuadrotorConfig.{name} must be {requirement}, got {value!r}")
+            require(math.isfinite(value) and value > 0, f"{c}.{name}", value, "finite and > 0")
+        require(0.0 < self.max_tilt_deg < 90.0, f"{c}.max_tilt_deg", self.max_tilt_deg, "in (0, 90)")
+        require(0.0 <= self.tilt_margin_deg < self.max_tilt_deg, f"{c}.tilt_margin_deg", self.tilt_margin_deg,
+                "in [0, max_tilt_deg)")
+        require(0.0 < self.min_thrust_to_weight < 1.0, f"{c}.min_thrust_to_weight", self.min_thrust_to_weight,
+                "in (0, 1)")
+        require(self.max_thrust_to_weight > 1.0, f"{c}.max_thrust_to_weight", self.max_thrust_to_weight, "> 1")
 
 
 @dataclass(frozen=True)
