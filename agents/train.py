@@ -24,9 +24,9 @@ from agents.warm_start import WarmStartConfig
 from trade_gym.bench.splits import require_training_worlds
 from trade.validation import check_choice, is_int_at_least, require
 from trade_gym.config import SCENE_NAMES
+from trade_gym.perception.oracle import FITTED_FIRST_FIX_DELAY_S
 
 ALGOS = ("ppo", "sac")
-FITTED_FIRST_FIX_DELAY_S = 2.6  # benchmarks/results/oracle_noise_fit.json, "fitted"
 DEMO_SEED_OFFSET = 10_000  # demonstrations use seeds seed + 10000 + rank, apart from training's
 
 

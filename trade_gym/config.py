@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
 from trade.validation import check_choice, check_non_negative, check_positive, check_range, is_int_at_least, require
+from trade_gym.perception.oracle import OracleConfig
 from trade_gym.reward import RewardConfig
 
 PERCEPTION_MODES = ("trade", "dcf", "oracle")
@@ -20,6 +21,7 @@ SCENE_NAMES = ("desert", "city", "mountain")
 # after the stack's own measured compute time for that frame.
 LATENCY_MODES = ("none", "fixed", "measured")
 MS_PER_S = 1000.0
+ORACLE_PREFIX = "oracle_"  # EnvConfig's oracle_<name> is OracleConfig's <name>
 
 PHYSICS_RATE_HZ = 240
 CAMERA_RATE_HZ = 30
@@ -55,16 +57,15 @@ class EnvConfig:
     # None: each reset's seed draws the world too. An int fixes the world (the "sequence") while the
     # reset seed still drives sensor noise, the start shift and the box perturbation (repeated runs).
     world_seed: int | None = None
-    # Oracle noise model (perception="oracle"). Defaults fitted to full TRADE's closed-loop errors on training
-    # worlds (benchmarks/fit_oracle_noise.py: median over scenes; results/oracle_noise_fit.json).
-    oracle_box_sigma_px: float = 1.725  # box jitter per x, y, w, h [px]
-    oracle_depth_sigma_frac: float = 0.0136  # target position noise per camera axis, fraction of depth
-    oracle_velocity_sigma_mps: float = 0.446  # target velocity noise per axis [m/s]
-    oracle_dropout_prob: float = 0.0  # chance per frame that the estimate is missing
-    oracle_noise_correlation_s: float = 0.564  # correlation time of the noise above [s]; 0 = white
-    # No 3D position/velocity this long after reset [s]. Fitted: 2.6 s (agents.train trains with it); the
-    # default stays 0 because the estimate's NaN depth in info defeats gymnasium's check_env (NaN != NaN).
-    oracle_first_fix_delay_s: float = 0.0
+    # Oracle noise model (perception="oracle"): oracle_<name> is OracleConfig's <name> (`self.oracle`), with its
+    # defaults (fitted to full TRADE's closed-loop errors on training worlds; see OracleConfig).
+    oracle_box_sigma_px: float = OracleConfig.box_sigma_px  # box jitter per x, y, w, h [px]
+    oracle_depth_sigma_frac: float = OracleConfig.depth_sigma_frac  # position noise per camera axis / depth
+    oracle_velocity_sigma_mps: float = OracleConfig.velocity_sigma_mps  # target velocity noise per axis [m/s]
+    oracle_dropout_prob: float = OracleConfig.dropout_prob  # chance per frame that the estimate is missing
+    oracle_noise_correlation_s: float = OracleConfig.noise_correlation_s  # of the noise above [s]; 0 = white
+    # No 3D position/velocity this long after reset [s] (fitted: FITTED_FIRST_FIX_DELAY_S, not the default)
+    oracle_first_fix_delay_s: float = OracleConfig.first_fix_delay_s
     imu_noise: bool = True
     render_oracle_frames: bool = False  # render the camera even in oracle mode (for the GT box)
     # Perception latency (`trade_gym.latency`): "none" (the estimate of a frame is in that frame's observation),
@@ -105,6 +106,11 @@ class EnvConfig:
         for f in fields(self):
             if f.type == "bool":
                 require(isinstance(getattr(self, f.name), bool), f.name, getattr(self, f.name), "a bool")
+
+    @property
+    def oracle(self) -> OracleConfig:
+        """The oracle's noise model: OracleConfig's fields from the `oracle_<field>` arguments."""
+        return OracleConfig(**{f.name: getattr(self, ORACLE_PREFIX + f.name) for f in fields(OracleConfig)})
 
     @property
     def physics_steps_per_frame(self) -> int:
