@@ -139,7 +139,7 @@ class TradeFollowEnv(gym.Env):
             fov_deg=self.config.camera_fov_deg,
             pitch_deg=self.config.camera_pitch_deg,
         )
-        self.imu_config = ImuConfig(enabled=self.config.imu_noise)
+        self.imu_config = ImuConfig(noise=self.config.imu_noise)
         self.action_space = spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
         self.observation_space = observation_space()
         self._action_scale = (

@@ -31,7 +31,7 @@ class GuidedTrackerConfig:
     box, top peak, never lost)."""
     box_refinement: bool = True
     """Fit the output box to the target's colour blob (the DCF box keeps its first aspect ratio)."""
-    snap_initial_box: bool = False
+    snap_init_box: bool = False
     """Snap the initial box to the colour blob at its centre before the DCF learns from it. A box drawn (or
     perturbed, as in the paper's protocol) a few px off a small target otherwise teaches the DCF a template
     that is half ground, which then holds on to the ground (desert, 256 px: +-5 px is half the car's width).
