@@ -4,10 +4,14 @@ of them). Every failure is a ValueError "<name> must be <requirement>, got <valu
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
+from typing import TypeVar
 
 import numpy as np
+
+Config = TypeVar("Config")
 
 
 def require(ok: bool, name: str, value: object, requirement: str) -> None:
@@ -19,6 +23,11 @@ def require(ok: bool, name: str, value: object, requirement: str) -> None:
 def is_finite_number(value: object) -> bool:
     """A finite Python int or float (numpy float64 is a float), not a bool."""
     return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+
+
+def is_positive_number(value: object) -> bool:
+    """A finite number > 0 (`is_finite_number`)."""
+    return is_finite_number(value) and value > 0
 
 
 def is_int_at_least(value: object, lowest: int, numpy_ints: bool = True) -> bool:
@@ -49,3 +58,18 @@ def check_non_negative(name: str, value: object) -> None:
 def check_range(name: str, value: object, low: float, high: float) -> None:
     """A finite number in the closed interval [low, high]."""
     require(low <= check_finite_number(name, value) <= high, name, value, f"in [{low}, {high}]")
+
+
+def nested_config(name: str, value: object, config_type: type[Config]) -> Config:
+    """`value` if it is a `config_type` (a frozen dataclass), else one built from a mapping of its fields (its own
+    checks then name the field and the bad value). TypeError naming a key that is not a field; ValueError for
+    anything else."""
+    if isinstance(value, Mapping):
+        fields = [f.name for f in dataclasses.fields(config_type)]
+        unknown = sorted(set(value) - set(fields))
+        if unknown:
+            raise TypeError(f"{name} has no field {', '.join(map(repr, unknown))}: {config_type.__name__}'s fields "
+                            f"are {', '.join(fields)}")
+        return config_type(**value)
+    require(isinstance(value, config_type), name, value, f"a {config_type.__name__} or a mapping of its fields")
+    return value

@@ -6,12 +6,14 @@ an error naming the parameter and the value.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
-from trade.validation import check_choice, check_non_negative, check_positive, check_range, is_int_at_least, require
+from trade.validation import (check_choice, check_non_negative, check_positive, check_range, is_int_at_least,
+                             nested_config, require)
 from trade_gym.perception.oracle import OracleConfig
 from trade_gym.reward import RewardConfig
+from trade_gym.sim.pose_source import VioConfig
+from trade_gym.sim.quadrotor import QuadrotorConfig
 
 PERCEPTION_MODES = ("trade", "dcf", "oracle")
 POSE_SOURCES = ("gt", "vio")
@@ -21,6 +23,8 @@ SCENE_NAMES = ("desert", "city", "mountain")
 # after the stack's own measured compute time for that frame.
 LATENCY_MODES = ("none", "fixed", "measured")
 MS_PER_S = 1000.0
+# EnvConfig's fields that hold a component's whole config (given as the config or a mapping of its fields)
+NESTED_CONFIGS = {"reward": RewardConfig, "quadrotor": QuadrotorConfig, "vio": VioConfig}
 ORACLE_PREFIX = "oracle_"  # EnvConfig's oracle_<name> is OracleConfig's <name>
 
 PHYSICS_RATE_HZ = 240
@@ -73,14 +77,16 @@ class EnvConfig:
     # compute time for that frame: not deterministic). perception_latency_ms only with "fixed" [ms].
     perception_latency: str = "none"
     perception_latency_ms: float | None = None
-    # The reward's weights (`trade_gym.reward`): a RewardConfig or a mapping of its fields.
+    # Components' configs, each a config or a mapping of its fields (NESTED_CONFIGS): the reward's weights
+    # (`trade_gym.reward`); the airframe, setpoint limits (the action scale, `trade_gym.action`) and controller
+    # gains; the VIO pose drift (pose_source="vio").
     reward: RewardConfig = field(default_factory=RewardConfig)
+    quadrotor: QuadrotorConfig = field(default_factory=QuadrotorConfig)
+    vio: VioConfig = field(default_factory=VioConfig)
 
     def __post_init__(self) -> None:
-        if isinstance(self.reward, Mapping):
-            object.__setattr__(self, "reward", RewardConfig(**self.reward))
-        if not isinstance(self.reward, RewardConfig):
-            raise ValueError(f"reward must be a RewardConfig or a mapping of its fields, got {self.reward!r}")
+        for name, config_type in NESTED_CONFIGS.items():
+            object.__setattr__(self, name, nested_config(name, getattr(self, name), config_type))
         check_choice("scene", self.scene, SCENE_NAMES)
         check_choice("perception", self.perception, PERCEPTION_MODES)
         check_choice("pose_source", self.pose_source, POSE_SOURCES)

@@ -30,7 +30,7 @@ from trade_gym.reward import RewardInputs, compute_reward
 from trade_gym.sim.camera import Camera, CameraConfig, CameraFrame
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import make_pose_source
-from trade_gym.sim.quadrotor import Quadrotor, QuadrotorConfig
+from trade_gym.sim.quadrotor import Quadrotor
 from trade_gym.sim.world import World, build_world
 
 GRAVITY_MPS2 = 9.81
@@ -115,7 +115,8 @@ class TradeFollowEnv(gym.Env):
     ## Arguments
     All fields of `trade_gym.config.EnvConfig`, e.g. `scene`, `perception`, `pose_source`,
     `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches,
-    `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0).
+    `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0), and
+    the components' configs `reward=`, `quadrotor=` and `vio=` (each the config or a mapping of its fields).
 
     ## Version History
     - v0: initial release.
@@ -125,6 +126,8 @@ class TradeFollowEnv(gym.Env):
     - v0, issue 17: the reward is the task: terms `visible`, `distance`, `height`, `effort`, `crash` replace
       `visible`, `centering`, `altitude`, `effort`, `crash` (centering paid for standing off the target while
       accelerating; altitude for climbing half the target's height); `reward=` sets the weights.
+    - v0, issue 18: `quadrotor=` (QuadrotorConfig: airframe, setpoint limits = action scale, gains) and `vio=`
+      (VioConfig: the VIO pose drift); the defaults are as before.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -132,7 +135,7 @@ class TradeFollowEnv(gym.Env):
     def __init__(self, **kwargs: Any) -> None:
         self.config = EnvConfig(**kwargs)
         self.render_mode = self.config.render_mode
-        self.quad_config = QuadrotorConfig()
+        self.quad_config = self.config.quadrotor
         self.camera_config = CameraConfig(
             width_px=self.config.camera_size,
             height_px=self.config.camera_size,
@@ -180,7 +183,7 @@ class TradeFollowEnv(gym.Env):
         self._state = self.quadrotor.read_state()
         self.imu = Imu(self.imu_config, rng)
         self._prime_imu_at_hover(rng)
-        self.pose_source = make_pose_source(self.config.pose_source, rng=rng)
+        self.pose_source = make_pose_source(self.config.pose_source, rng=rng, vio_config=self.config.vio)
         self._t_s = 0.0
         self._cache_parked_decoys()
         self._steps = 0

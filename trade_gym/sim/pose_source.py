@@ -12,7 +12,7 @@ from typing import Protocol
 import numpy as np
 
 from trade.geometry import Pose, rotation_z
-from trade.validation import require
+from trade.validation import is_finite_number, require
 
 POSE_SOURCE_NAMES = ("gt", "vio")
 
@@ -34,7 +34,7 @@ class VioConfig:
     def __post_init__(self) -> None:
         for name in ("position_drift_sigma_m_per_sqrt_m", "yaw_drift_sigma_rad_per_sqrt_m"):
             value = getattr(self, name)
-            require(0.0 <= value < math.inf, f"VioConfig.{name}", value, "finite and >= 0")
+            require(is_finite_number(value) and value >= 0, f"VioConfig.{name}", value, "a finite number >= 0")
 
 
 class PoseSource(Protocol):
