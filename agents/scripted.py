@@ -12,11 +12,9 @@ from typing import Any
 import numpy as np
 
 from trade.validation import require
+from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, DEFAULT_ACTION_SCALE
 from trade_gym.config import CAMERA_PITCH_RANGE_DEG, EnvConfig
 
-# Action scale of TradeFollow-v0 (QuadrotorConfig limits): m/s per unit action.
-DEFAULT_MAX_SPEED_HORIZONTAL_MPS = 8.0
-DEFAULT_MAX_SPEED_VERTICAL_MPS = 3.0
 
 
 @dataclass(frozen=True)
@@ -28,8 +26,9 @@ class ScriptedFollowerConfig:
     height_gain_per_s: float = 0.6
     velocity_feedforward: float = 1.0
     camera_pitch_deg: float = EnvConfig.camera_pitch_deg  # must match the env's
-    max_speed_horizontal_mps: float = DEFAULT_MAX_SPEED_HORIZONTAL_MPS
-    max_speed_vertical_mps: float = DEFAULT_MAX_SPEED_VERTICAL_MPS
+    # the env's action scale (`env.action_scale`) [m/s per unit action]
+    max_speed_horizontal_mps: float = DEFAULT_ACTION_SCALE.horizontal_mps
+    max_speed_vertical_mps: float = DEFAULT_ACTION_SCALE.vertical_mps
 
     def __post_init__(self) -> None:
         for name in ("position_gain_per_s", "height_gain_per_s", "image_gain_mps", "max_speed_horizontal_mps",
@@ -86,12 +85,12 @@ class ScriptedFollower:
         the feature triangulation its baseline."""
         cfg = self.config
         if not np.any(bbox_norm):
-            return np.zeros(4)
+            return np.zeros(ACTION_DIM)
         offset = 2.0 * (bbox_norm[:2] - 0.5)  # (right, down) in half-image units
         v_forward, v_left = -cfg.image_gain_mps * offset[1], -cfg.image_gain_mps * offset[0]
         return np.array([
-            np.clip(v_forward / cfg.max_speed_horizontal_mps, -1.0, 1.0),
-            np.clip(v_left / cfg.max_speed_horizontal_mps, -1.0, 1.0),
+            np.clip(v_forward / cfg.max_speed_horizontal_mps, ACTION_LOW, ACTION_HIGH),
+            np.clip(v_left / cfg.max_speed_horizontal_mps, ACTION_LOW, ACTION_HIGH),
             0.0,
             0.0,
         ])
@@ -99,15 +98,15 @@ class ScriptedFollower:
     def _act(self, rel: np.ndarray, vel: np.ndarray, hold_height_m: float) -> np.ndarray:
         cfg = self.config
         if not np.isfinite(hold_height_m):
-            return np.zeros(4)
+            return np.zeros(ACTION_DIM)
         # Desired horizontal offset: the target sits on the optical axis at the held height.
         ahead_m = hold_height_m / np.tan(np.radians(cfg.camera_pitch_deg))
         error_xy = rel[:2] - np.array([ahead_m, 0.0])
         v_xy = cfg.velocity_feedforward * vel[:2] + cfg.position_gain_per_s * error_xy
         v_z = cfg.height_gain_per_s * (hold_height_m - (-rel[2]))
         return np.array([
-            np.clip(v_xy[0] / cfg.max_speed_horizontal_mps, -1.0, 1.0),
-            np.clip(v_xy[1] / cfg.max_speed_horizontal_mps, -1.0, 1.0),
-            np.clip(v_z / cfg.max_speed_vertical_mps, -1.0, 1.0),
+            np.clip(v_xy[0] / cfg.max_speed_horizontal_mps, ACTION_LOW, ACTION_HIGH),
+            np.clip(v_xy[1] / cfg.max_speed_horizontal_mps, ACTION_LOW, ACTION_HIGH),
+            np.clip(v_z / cfg.max_speed_vertical_mps, ACTION_LOW, ACTION_HIGH),
             0.0,
         ])

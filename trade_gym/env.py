@@ -14,10 +14,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pybullet as p
-from gymnasium import spaces
 
 from trade.geometry import Pose
 from trade.types import iou
+from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, ActionScale, action_space
 from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.ground_truth import GroundTruth, VehicleBox, box_corners, compute_ground_truth
@@ -34,7 +34,6 @@ from trade_gym.sim.quadrotor import Quadrotor
 from trade_gym.sim.world import World, build_world
 
 GRAVITY_MPS2 = 9.81
-ACTION_DIM = 4
 # Rays for the ground-depth truth reach this far beyond the drone's height [m].
 GROUND_RAY_RANGE_M = 1000.0
 
@@ -52,7 +51,8 @@ class TradeFollowEnv(gym.Env):
 
     ## Action Space
     `Box(-1, 1, (4,), float32)`: forward, left and up velocity in the drone's heading frame and
-    yaw rate, scaled by `QuadrotorConfig` limits (8 m/s horizontal, 3 m/s vertical, 1.5 rad/s).
+    yaw rate, scaled by the quadrotor's setpoint limits (`trade_gym.action`, `env.action_scale`; by default
+    8 m/s horizontal, 3 m/s vertical, 1.5 rad/s; `quadrotor=` sets them).
     Values beyond the bounds act as the bound; a wrong shape or a non-finite value raises
     `ValueError`.
 
@@ -143,14 +143,10 @@ class TradeFollowEnv(gym.Env):
             pitch_deg=self.config.camera_pitch_deg,
         )
         self.imu_config = ImuConfig(noise=self.config.imu_noise)
-        self.action_space = spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
+        self.action_space = action_space()
         self.observation_space = observation_space()
-        self._action_scale = (
-            self.quad_config.max_speed_horizontal_mps,
-            self.quad_config.max_speed_horizontal_mps,
-            self.quad_config.max_speed_vertical_mps,
-            self.quad_config.max_yaw_rate_radps,
-        )
+        self.action_scale = ActionScale.of(self.quad_config)  # what followers divide their setpoints by
+        self._action_scale = self.action_scale.per_component()
         self._client: int | None = p.connect(p.DIRECT)
         self.camera = Camera(self._client, self.camera_config)
         self._T_cam_body = self.camera.T_body_cam.inverse()
@@ -325,7 +321,7 @@ class TradeFollowEnv(gym.Env):
         values = a.tolist()
         if not all(math.isfinite(v) for v in values):
             raise ValueError(f"action of shape ({ACTION_DIM},) must be finite, got {values}")
-        return [min(max(v, -1.0), 1.0) for v in values]
+        return [min(max(v, ACTION_LOW), ACTION_HIGH) for v in values]
 
     def _advance(self, action: list[float]) -> bool:
         """Run one camera frame of physics under the action; True if the drone crashed."""
