@@ -22,11 +22,12 @@ from agents.obs_flatten import FlatObservation
 from agents.training_env import SceneRandomizedEnv, ZeroYawAction
 from agents.warm_start import WarmStartConfig
 from trade_gym.bench.splits import require_training_worlds
+from trade.validation import check_choice, is_int_at_least, require
 from trade_gym.config import SCENE_NAMES
+from trade_gym.perception.oracle import FITTED_FIRST_FIX_DELAY_S
 
 ALGOS = ("ppo", "sac")
 DEFAULT_ALGO = "ppo"
-FITTED_FIRST_FIX_DELAY_S = 2.6  # benchmarks/results/oracle_noise_fit.json, "fitted"
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"  # <algo>.yml: published settings
 DEMO_SEED_OFFSET = 10_000  # demonstrations use seeds seed + 10000 + rank, apart from training's
 
@@ -73,24 +74,21 @@ class TrainConfig:
     verbose: int = 0  # SB3 logging to stdout (1: rollout/train statistics every update)
 
     def __post_init__(self) -> None:
-        if self.algo not in ALGOS:
-            raise ValueError(f"TrainConfig.algo must be one of {ALGOS}, got {self.algo!r}")
+        c = "TrainConfig"
+        check_choice(f"{c}.algo", self.algo, ALGOS)
         for name in ("total_steps", "n_envs", "n_steps_per_env", "batch_size", "n_epochs", "torch_threads",
                      "sde_sample_freq",
                      "sac_buffer_size", "sac_learning_starts", "sac_gradient_steps"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"TrainConfig.{name} must be an integer >= 1, got {value!r}")
-        if not self.scenes or any(s not in SCENE_NAMES for s in self.scenes):
-            raise ValueError(f"TrainConfig.scenes must be a non-empty subset of {SCENE_NAMES}, got {self.scenes!r}")
+            require(is_int_at_least(value, 1, numpy_ints=False), f"{c}.{name}", value, "an integer >= 1")
+        require(bool(self.scenes) and all(s in SCENE_NAMES for s in self.scenes), f"{c}.scenes", self.scenes,
+                f"a non-empty subset of {SCENE_NAMES}")
         for name in ("episode_duration_s", "learning_rate", "clip_range"):
-            if not np.isfinite(getattr(self, name)) or getattr(self, name) <= 0:
-                raise ValueError(f"TrainConfig.{name} must be > 0, got {getattr(self, name)!r}")
+            value = getattr(self, name)
+            require(np.isfinite(value) and value > 0, f"{c}.{name}", value, "> 0")
         for name in ("gamma", "gae_lambda"):
-            if not 0.0 < getattr(self, name) <= 1.0:
-                raise ValueError(f"TrainConfig.{name} must be in (0, 1], got {getattr(self, name)!r}")
-        if not np.isfinite(self.ent_coef) or self.ent_coef < 0:
-            raise ValueError(f"TrainConfig.ent_coef must be >= 0, got {self.ent_coef!r}")
+            require(0.0 < getattr(self, name) <= 1.0, f"{c}.{name}", getattr(self, name), "in (0, 1]")
+        require(np.isfinite(self.ent_coef) and self.ent_coef >= 0, f"{c}.ent_coef", self.ent_coef, ">= 0")
         if self.warm_start is not None and self.algo != "ppo":
             raise ValueError(f"TrainConfig.warm_start needs algo='ppo', got algo={self.algo!r}")
         if self.critic_warmup_steps < 0 or (self.warm_start is not None
@@ -100,8 +98,8 @@ class TrainConfig:
         if self.checkpoint_every_steps < 0 or self.verbose not in (0, 1, 2):
             raise ValueError(f"TrainConfig.checkpoint_every_steps must be >= 0 and verbose 0, 1 or 2, got "
                              f"{self.checkpoint_every_steps!r} and {self.verbose!r}")
-        if not self.hidden_units or any(int(h) < 1 for h in self.hidden_units):
-            raise ValueError(f"TrainConfig.hidden_units must be positive layer widths, got {self.hidden_units!r}")
+        require(bool(self.hidden_units) and all(int(h) >= 1 for h in self.hidden_units), f"{c}.hidden_units",
+                self.hidden_units, "positive layer widths")
         world_seed = dict(self.env_kwargs).get("world_seed")
         if world_seed is not None:  # training draws its worlds from the training split; a fixed one must be too
             require_training_worlds([world_seed], "TrainConfig.env_kwargs world_seed")

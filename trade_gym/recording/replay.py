@@ -21,7 +21,8 @@ from trade_gym.ground_truth import GroundTruth
 from trade_gym.metrics import depth_or_none, episode_metrics, on_decoy
 from trade_gym.perception.base import PerceptionOutput, SensorFrame
 from trade_gym.perception.trade_stack import STACK_SWITCHES, TradePerception, pipeline_config
-from trade_gym.recording.format import META_FILE, FrameTruth, SequenceError, encode_box, encode_real, json_safe
+from trade_gym.recording.format import (META_FILE, FrameTruth, SequenceError, current_setting_names, encode_box,
+                                        encode_real, json_safe)
 from trade_gym.recording.reader import Sequence, SequenceFrame
 
 FloatArray = npt.NDArray[np.float64]
@@ -207,7 +208,7 @@ def _settings_match(sequence: Sequence, settings: ReplaySettings) -> bool | None
     recorded = (sequence.meta.get("perception") or {}).get("pipeline_config")
     if recorded is None:
         return None
-    return json_safe(asdict(pipeline_config(settings.env_config()))) == recorded
+    return json_safe(asdict(pipeline_config(settings.env_config()))) == current_setting_names(recorded)
 
 
 def _warnings(sequence: Sequence, match: bool | None) -> list[str]:
