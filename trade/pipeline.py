@@ -55,13 +55,12 @@ class PipelineConfig:
     single_image_depth: bool = False
     depth_only_ransac: bool = True  # depth-only alignment by 2-point RANSAC; False: plain least squares
     object_height_m: float = 1.5  # prior object height; the plane is lifted by half of it
-    # Use the ground mask's object height estimate for the lift instead of the prior. Off: on the
-    # desert (seed 0, 300 frames) it raised the target-depth RMSE from 0.12 m to 0.51 m.
+    # Lift by the ground mask's object height estimate instead of the prior; off, as it raised the desert's
+    # target-depth error (docs/perception.md).
     object_height_from_mask: bool = False
     min_plane_points: int = 10  # promoted ROI points a frame needs for its own plane fit
     # With ground_mask on, the points left have passed the mask and the depth-agreement test, so fewer make a
-    # plane: this replaces min_plane_points and fusion.min_points. City at 32 m: 6-9 converged tracks pass per
-    # frame; at 10, seed 3 (300 frames, gt pose) never had a plane, at 6 its ground RMSE is 1.27 m.
+    # plane: this replaces min_plane_points and fusion.min_points (at 10 a city frame at 32 m rarely has a plane).
     min_masked_plane_points: int = 6
     trajectory_preview_s: float = 1.0  # horizon of the predicted trajectory kept for drawing
     trajectory_preview_points: int = 10

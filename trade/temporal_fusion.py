@@ -24,8 +24,8 @@ class TemporalFusionConfig:
     re-initialised from the current frame (the ground really moved, e.g. a cliff); 0 never does;
     max_age_frames: points buffered more than this many updates ago leave the refit and the gate's RMS
     (they stay in the buffer until overwritten); 0: the buffer size alone bounds the memory. The paper's
-    1000 points hold 4-5 frames of its up to 225 ROI features per frame (3x3 tiles x 25); at 256 px the city
-    gives under 6 masked ground points in most frames, and 1000 points spanned ~7 s of the target's path."""
+    1000 points hold 4-5 frames of its up to 225 ROI features per frame (3x3 tiles x 25), but seconds of a
+    masked ground that yields a few points per frame: the age limit keeps the fit to the recent ground."""
 
     buffer_size: int = 1000
     gate_mse_factor: float = 3.0  # 3-sigma gate on the orthogonal residual

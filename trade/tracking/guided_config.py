@@ -35,8 +35,8 @@ class GuidedTrackerConfig:
     """Snap the initial box to the colour blob at its centre before the DCF learns from it. A box drawn (or
     perturbed, as in the paper's protocol) a few px off a small target otherwise teaches the DCF a template
     that is half ground, which then holds on to the ground (desert, 256 px: +-5 px is half the car's width).
-    Off by default: an exact box is better left as it is (a truck's colour blob is its cargo box alone;
-    city, clean start: mean IoU over 90 frames 0.61 snapped against 0.79)."""
+    Off by default: an exact box is better left as it is (a truck's colour blob is its cargo box alone, so
+    snapping shrinks its box)."""
     snap_search_fraction: float = 0.5
     """Before the blob snap, the given box is moved to the offset that best separates its colours from its
     surround (ColourBoxRefiner.separation), over whole-px shifts up to this fraction of its shorter side along
@@ -55,13 +55,13 @@ class GuidedTrackerConfig:
     fraction of the search window along either axis (a prediction from a wrong 3D estimate drifts off)."""
     reacquire_rings: int = 1
     """Re-detection after an untracked frame searches the windows on this many rings of a grid around the
-    prediction's window: a coasting prediction drifts (after 1-3 s under a roof 12-16 px at 160 px, more
-    than half the 2x-box window)."""
+    prediction's window: a prediction coasting for 1-3 s under a roof drifts by more than half the 2x-box
+    window."""
     reacquire_step_fraction: float = 0.5
     """Spacing of the re-detection grid, as a fraction of the search window's sides."""
     reacquire_min_peak_score: float = 0.2
-    """A peak is taken back only at this score (hysteresis: clutter near the prediction scores 0.1-0.2 while
-    the target is hidden) and where the colour model finds the target's blob."""
+    """A peak is taken back only at this score, above `min_peak_score` (hysteresis against clutter near a hidden
+    target's prediction), and where the colour model finds the target's blob."""
     reacquire_confident_score: float = 0.35
     """A peak in the prediction's window is taken back without the colour check at this score: a target
     re-emerging from under an occluder shows only part of its blob, which the colour model refuses."""
@@ -70,7 +70,7 @@ class GuidedTrackerConfig:
     can be, d^2 = r^T (C + s^2 I)^-1 r <= reacquire_gate_chi2, r its offset from the prediction [px], C the
     prediction's projected position covariance (it grows with the time lost), s see reacquire_gate_box_sigma.
     The default is the 99 % point of chi-square with 2 degrees of freedom; inf turns the gate off. Without
-    it, an identical car passing 20-35 px beside a hidden target was taken within 1-8 frames of the loss.
+    it, re-detection takes an identical car passing beside the hidden target.
     Candidates in the gate are tried most probable first: score / T - d^2 / 2 (the paper's softmax
     likelihood times the prediction's Gaussian)."""
     reacquire_gate_box_sigma: float = 0.25
@@ -78,14 +78,12 @@ class GuidedTrackerConfig:
     target coming out from under an occluder shows part of its blob)."""
     coast_scale_from_depth: bool = True
     """While lost, size the search and coasting boxes by the prediction's depth (apparent size ~ 1 / depth)
-    from their size at the last tracked frame. Under a 1-3 s occlusion in the desert the target's box shrank
-    1.4x per side while the boxes kept their size, and the refiner's area test then refused the target and
-    took a lookalike."""
+    from their size at the last tracked frame: a target that drew away while hidden comes back smaller than
+    fixed-size boxes, and the refiner's area test would refuse it and take a lookalike."""
     coast_scale_max_relative_sigma: float = 0.3
     """Scale by depth only while both depths are known to this relative sigma (the depth's 1-sigma over the
-    depth): a 3D estimate gone wrong would otherwise shrink the boxes to nothing (city reset seed 1 put the
-    target 0.2 m from the camera, relative sigma 1.8-3.7; under desert occlusions of up to 3 s it stayed
-    within 0.26, median 0.06)."""
+    depth): a 3D estimate gone wrong, whose relative sigma is large, would otherwise shrink the boxes to
+    nothing."""
 
     def __post_init__(self) -> None:
         checks = {  # field: (valid, requirement), checked in this order
