@@ -132,6 +132,8 @@ def test_zero_yaw_action_appends_zero_yaw_rate_and_steps_the_env():
 
 def test_published_ppo_hyperparameters_are_train_configs_defaults_and_name_every_field():
     assert load_train_config(hyperparams_path("ppo")) == TrainConfig()
+    sac = load_train_config(hyperparams_path("sac"))
+    assert sac.algo == "sac" and sac.warm_start is None and sac.env_kwargs == TrainConfig().env_kwargs
 
 
 @pytest.mark.parametrize("edit, words", [(lambda d: d.pop("gamma"), "missing ['gamma']"),
