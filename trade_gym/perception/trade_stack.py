@@ -1,7 +1,7 @@
 """The TRADE stack (`perception="trade"`) and its baseline (`"dcf"`) as env perception modes.
 
-Runs `trade.TradePipeline` on the rendered frames with the pose source's camera pose; the
-ground-truth box is used only to initialise the tracker at reset (as the paper's protocol does).
+Runs `trade.TradePipeline` (with its frame guards) on the rendered frames with the pose source's camera
+pose; the ground-truth box is used only to initialise the tracker at reset (as the paper's protocol does).
 """
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ from trade.depth_alignment import sample_map
 from trade.raycast import raycast_plane
 from trade.single_image_depth import SingleImageDepth
 from trade.tracking.guided_config import GuidedTrackerConfig
-from trade.trajectory import TrajectoryModel, TrajectoryState
 from trade.types import BBox
 from trade_gym.config import EnvConfig
 from trade_gym.ground_truth import GroundTruth
@@ -28,13 +27,6 @@ FEATURE_DEPTH_RANGE_M = (5.0, 60.0)  # colour map range for ROI feature depths
 POINT_RADIUS_PX = 1
 INLIER_RADIUS_PX = 3
 PLANE_INLIER_DRAW_M = 0.5  # the MSAC inlier threshold
-# Frames the stack does not track (it coasts on the trajectory model instead, reporting no fresh box):
-BLANK_MAX_RANGE = 8  # grey-level range (max - min, every pixel channel) at or below which a frame is blank
-FROZEN_MIN_MOTION_M = 1e-3  # identical pixels although the camera moved this far [m] (or turned): frozen
-FROZEN_MIN_TURN_RAD = 1e-3
-# With trajectory guidance, a frame is not tracked while the trajectory model puts the target this far (as a
-# fraction of the image side) outside the image, or behind the camera: no peak in it can be the target.
-OUT_OF_VIEW_MARGIN_FRACTION = 0.25
 # The stack's random generator is its own, seeded at reset by one draw in [0, STACK_SEED_HIGH) from the env's
 # generator: its draws (RANSAC samples) never interleave with the IMU's and the pose source's, so a replay of the
 # recorded sensors with the recorded seed gives the closed loop's estimates exactly.
@@ -56,26 +48,6 @@ def pipeline_config(config: EnvConfig) -> PipelineConfig:
     )
 
 
-def unusable_frame(sensors: SensorFrame, tracked: SensorFrame) -> str | None:
-    """Why the stack cannot track `sensors` after the last tracked frame `tracked`: "missing" (no image),
-    "stale" (time did not advance: a duplicate), "blank" (grey-level range <= BLANK_MAX_RANGE), "frozen"
-    (the same pixels although the camera moved); None when the frame is usable."""
-    rgb = sensors.rgb
-    if rgb is None:
-        return "missing"
-    if sensors.t_s <= tracked.t_s:
-        return "stale"
-    if int(rgb.max()) - int(rgb.min()) <= BLANK_MAX_RANGE:
-        return "blank"
-    if rgb is tracked.rgb or np.array_equal(rgb, tracked.rgb):
-        moved = np.linalg.norm(sensors.T_world_cam.t - tracked.T_world_cam.t) > FROZEN_MIN_MOTION_M
-        # rotation angle between the two camera poses: cos(a) = (trace(R1^T R2) - 1) / 2
-        cos_turn = (np.trace(tracked.T_world_cam.R.T @ sensors.T_world_cam.R) - 1.0) / 2.0
-        if moved or cos_turn < np.cos(FROZEN_MIN_TURN_RAD):
-            return "frozen"
-    return None
-
-
 class TradePerception:
     """Adapter from the env's sensors to `TradePipeline` and back to `PerceptionOutput`."""
 
@@ -86,9 +58,8 @@ class TradePerception:
         needs_model = self.pipeline_config.ground_mask or self.pipeline_config.single_image_depth
         self.depth_model = SingleImageDepth() if needs_model else None
         self.pipeline: TradePipeline | None = None
-        self.last: Estimate | None = None
-        self._T_world_cam = None
-        self._tracked_frame: SensorFrame | None = None  # the last frame the pipeline tracked
+        self.last: Estimate | None = None  # the pipeline's estimate at the last tracked frame
+        self._T_world_cam = None  # that frame's camera pose (the overlay draws from it)
         self.rng_seed: int | None = None  # the seed of the stack's own generator this episode
 
     def reset(self, sensors: SensorFrame, init_box: FloatArray, truth: GroundTruth,
@@ -109,44 +80,14 @@ class TradePerception:
         self.last = self.pipeline.initialise(sensors.rgb, BBox.from_array(init_box), sensors.T_world_cam,
                                              sensors.t_s)
         self._T_world_cam = sensors.T_world_cam
-        self._tracked_frame = sensors
         return self._output(self.last, truth, sensors)
 
     def step(self, sensors: SensorFrame, truth: GroundTruth) -> PerceptionOutput:
-        if unusable_frame(sensors, self._tracked_frame) is not None or self._predicted_out_of_view(sensors):
-            return self._coast(sensors, truth)
-        self.last = self.pipeline.step(sensors.rgb, sensors.T_world_cam, sensors.t_s, finite_imu(sensors.imu))
-        self._T_world_cam = sensors.T_world_cam
-        self._tracked_frame = sensors
-        return self._output(self.last, truth, sensors)
-
-    def _predicted_out_of_view(self, sensors: SensorFrame) -> bool:
-        """Trajectory guidance on and the model's target position at this frame's time projects more than
-        OUT_OF_VIEW_MARGIN_FRACTION of the image outside it, or lies behind the camera."""
-        trajectory = self.pipeline.trajectory
-        if not (self.pipeline_config.tracker.trajectory_guidance and trajectory.initialized):
-            return False
-        position = _predict_to(trajectory, sensors.t_s).position_m
-        p_cam = sensors.T_world_cam.inverse().apply(position.reshape(1, 3))
-        if p_cam[0, 2] <= 0.0:
-            return True
-        u, v = self.intrinsics.project(p_cam)[0]
-        w, h = self.intrinsics.width_px, self.intrinsics.height_px
-        mu, mv = OUT_OF_VIEW_MARGIN_FRACTION * w, OUT_OF_VIEW_MARGIN_FRACTION * h
-        return not (-mu <= u <= w - 1 + mu and -mv <= v <= h - 1 + mv)
-
-    def _coast(self, sensors: SensorFrame, truth: GroundTruth) -> PerceptionOutput:
-        """No usable image: the trajectory model predicts the target to this frame's time; no box."""
-        position = velocity = np.full(3, np.nan)
-        depth = float("nan")
-        trajectory = self.pipeline.trajectory
-        if trajectory.initialized:
-            state = _predict_to(trajectory, sensors.t_s)
-            position, velocity = state.position_m, state.velocity_mps
-            # the predicted position's camera-frame z
-            depth = float(sensors.T_world_cam.inverse().apply(position.reshape(1, 3))[0, 2])
-        return PerceptionOutput(np.full(4, np.nan), position, velocity, depth, float("nan"),
-                                self._ground_depth(self.last, truth, sensors), valid=False)
+        """The pipeline's estimate of this frame; a frame its guards refuse coasts (no fresh box)."""
+        est = self.pipeline.step(sensors.rgb, sensors.T_world_cam, sensors.t_s, finite_imu(sensors.imu))
+        if est.coast_reason is None:
+            self.last, self._T_world_cam = est, sensors.T_world_cam
+        return self._output(est, truth, sensors)
 
     def _output(self, est: Estimate, truth: GroundTruth, sensors: SensorFrame) -> PerceptionOutput:
         bbox = est.box.as_array() if est.box is not None else np.full(4, np.nan)
@@ -184,12 +125,6 @@ class TradePerception:
         if self.last is None or self._T_world_cam is None:
             return None
         return TradeOverlay(self.last, self.intrinsics, self._T_world_cam)
-
-
-def _predict_to(trajectory: TrajectoryModel, t_s: float) -> TrajectoryState:
-    """The model's state advanced to t_s [s]; the current state when t_s is not later (a stale frame)."""
-    state = trajectory.state
-    return trajectory.predict(t_s) if t_s > state.t_s else state
 
 
 class TradeOverlay:
