@@ -1,7 +1,8 @@
 """The TRADE stack (`perception="trade"`) and its baseline (`"dcf"`) as env perception modes.
 
-Runs `trade.TradePipeline` (with its frame guards) on the rendered frames with the pose source's camera
-pose; the ground-truth box is used only to initialise the tracker at reset (as the paper's protocol does).
+Runs `trade.TradePipeline` (with its frame guards) on the delivered frames with the pose source's camera
+pose. It sees the sensors only: the initial box at reset (the paper's protocol: the ground-truth box, perturbed)
+is all it is told; the env scores its estimates (`trade_gym.scoring`).
 """
 
 from __future__ import annotations
@@ -12,14 +13,11 @@ import numpy.typing as npt
 
 from trade.geometry import CameraIntrinsics
 from trade.pipeline import Estimate, PipelineConfig, TradePipeline
-from trade.depth_alignment import sample_map
-from trade.raycast import raycast_plane
 from trade.single_image_depth import SingleImageDepth
 from trade.tracking.guided_config import GuidedTrackerConfig
 from trade.types import BBox
 from trade_gym.config import EnvConfig
-from trade_gym.ground_truth import GroundTruth
-from trade_gym.perception.base import FloatArray, PerceptionOutput, SensorFrame, finite_imu
+from trade_gym.perception.base import FloatArray, GroundEstimate, PerceptionOutput, SensorFrame, finite_imu
 
 TRAJECTORY_COLOUR_RGB = (255, 0, 255)  # magenta, as in the paper's figures
 INLIER_COLOUR_RGB = (255, 255, 0)
@@ -62,13 +60,11 @@ class TradePerception:
         self._T_world_cam = None  # that frame's camera pose (the overlay draws from it)
         self.rng_seed: int | None = None  # the seed of the stack's own generator this episode
 
-    def reset(self, sensors: SensorFrame, init_box: FloatArray, truth: GroundTruth,
-              rng: np.random.Generator) -> PerceptionOutput:
+    def reset(self, sensors: SensorFrame, init_box: FloatArray, rng: np.random.Generator) -> PerceptionOutput:
         """Start an episode; the stack's generator is seeded by one draw from `rng` (the env's)."""
-        return self.reset_seeded(sensors, init_box, truth, int(rng.integers(STACK_SEED_HIGH)))
+        return self.reset_seeded(sensors, init_box, int(rng.integers(STACK_SEED_HIGH)))
 
-    def reset_seeded(self, sensors: SensorFrame, init_box: FloatArray, truth: GroundTruth,
-                     rng_seed: int) -> PerceptionOutput:
+    def reset_seeded(self, sensors: SensorFrame, init_box: FloatArray, rng_seed: int) -> PerceptionOutput:
         """Start an episode with the stack's generator seeded by `rng_seed` (a replay passes the recorded one)."""
         if sensors.rgb is None:
             raise RuntimeError("the trade perception needs rendered frames")
@@ -80,51 +76,33 @@ class TradePerception:
         self.last = self.pipeline.initialise(sensors.rgb, BBox.from_array(init_box), sensors.T_world_cam,
                                              sensors.t_s)
         self._T_world_cam = sensors.T_world_cam
-        return self._output(self.last, truth, sensors)
+        return _output(self.last)
 
-    def step(self, sensors: SensorFrame, truth: GroundTruth) -> PerceptionOutput:
+    def step(self, sensors: SensorFrame) -> PerceptionOutput:
         """The pipeline's estimate of this frame; a frame its guards refuse coasts (no fresh box)."""
         est = self.pipeline.step(sensors.rgb, sensors.T_world_cam, sensors.t_s, finite_imu(sensors.imu))
         if est.coast_reason is None:
             self.last, self._T_world_cam = est, sensors.T_world_cam
-        return self._output(est, truth, sensors)
-
-    def _output(self, est: Estimate, truth: GroundTruth, sensors: SensorFrame) -> PerceptionOutput:
-        bbox = est.box.as_array() if est.box is not None else np.full(4, np.nan)
-        return PerceptionOutput(
-            bbox=bbox,
-            position_world_m=est.position_world_m,
-            velocity_world_mps=est.velocity_world_mps,
-            target_depth_m=est.depth_m,
-            target_depth_sigma_m=est.depth_sigma_m,
-            ground_depth_m=self._ground_depth(est, truth, sensors),
-            valid=est.tracked and est.box is not None,
-        )
-
-    def _ground_depth(self, est: Estimate, truth: GroundTruth, sensors: SensorFrame) -> float:
-        """Depth of the estimated ground plane along the ground-truth box centre's ray (the paper's
-        Table 1 quantity: plane quality independent of tracking errors)."""
-        return self.ground_depth_at(est, sensors, truth.target_bbox)
-
-    def ground_depth_at(self, est: Estimate, sensors: SensorFrame, box: FloatArray) -> float:
-        """Depth [m] of `est`'s ground plane along the ray of the centre of `box` (x, y, w, h [px]) from the pose
-        of `sensors`; NaN without a box or a plane. Depth-only mode: the aligned depth map read at that pixel
-        (which shows the target's top, so it is short by about its height)."""
-        if not np.all(np.isfinite(box)):
-            return float("nan")
-        centre = box[:2] + box[2:] / 2.0
-        if est.depth_map_m is not None:
-            return float(sample_map(est.depth_map_m, centre.reshape(1, 2))[0])
-        if est.plane is None:
-            return float("nan")
-        hit = raycast_plane(self.intrinsics, sensors.T_world_cam, centre, est.plane, 0.0)
-        return hit.depth_m if hit.valid else float("nan")
+        return _output(est)
 
     @property
     def overlay(self) -> TradeOverlay | None:
         if self.last is None or self._T_world_cam is None:
             return None
         return TradeOverlay(self.last, self.intrinsics, self._T_world_cam)
+
+
+def _output(est: Estimate) -> PerceptionOutput:
+    """The env's view of a pipeline estimate: box (NaN: none), trajectory state, depth, the ground it holds."""
+    return PerceptionOutput(
+        bbox=est.box.as_array() if est.box is not None else np.full(4, np.nan),
+        position_world_m=est.position_world_m,
+        velocity_world_mps=est.velocity_world_mps,
+        target_depth_m=est.depth_m,
+        target_depth_sigma_m=est.depth_sigma_m,
+        ground=GroundEstimate(plane=est.plane, depth_map_m=est.depth_map_m),
+        valid=est.tracked and est.box is not None,
+    )
 
 
 class TradeOverlay:
