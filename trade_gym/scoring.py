@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from trade_gym.sim.world import World
 
 Box = tuple[float, ...]  # (x, y, w, h) [px]
+GROUND_LIFT_M = 0.0  # the ground itself is scored, not the plane lifted by half the target's height
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,7 +58,7 @@ def ground_depth_along(ground: GroundEstimate, box: FloatArray, T_world_cam: Pos
     if ground.depth_map_m is not None:
         return float(sample_map(ground.depth_map_m, centre.reshape(1, 2))[0])
     if ground.plane is not None:
-        hit = raycast_plane(intrinsics, T_world_cam, centre, ground.plane, 0.0)
+        hit = raycast_plane(intrinsics, T_world_cam, centre, ground.plane, GROUND_LIFT_M)
         return hit.depth_m if hit.valid else float("nan")
     return float(true_ground_depth_m * ground.true_depth_factor)
 

@@ -20,6 +20,7 @@ from trade.types import BBox, iou
 ALTITUDE_M = 15.0
 FPS = 30.0
 CAMERA_VELOCITY_MPS = np.array([2.0, 0.0, 0.0])
+TARGET_START_M = np.array([1.0, -1.0])
 TARGET_VELOCITY_MPS = np.array([2.2, 0.4])
 WARM_UP_FRAMES = 45  # the trajectory model has its first fix by then (ROI depths converge after ~25 frames)
 TRACKED_IOU = 0.5
@@ -27,12 +28,14 @@ FAR_M = 200.0  # a camera this far sideways cannot see the target
 GUARD = FrameGuardConfig()
 
 
-def _frame(scene: PlanarScene, k: int, camera_offset_m: np.ndarray = np.zeros(3)):
-    """Frame k of the planar sequence: image, camera pose, time [s], true box."""
+def _frame(scene: PlanarScene, k: int, camera_offset_m: np.ndarray | None = None):
+    """Frame k of the planar sequence: image, camera pose (moved by `camera_offset_m` [m] from where the image was
+    taken), time [s], true box."""
     t = k / FPS
     cam = np.array([0.0, 0.0, ALTITUDE_M]) + CAMERA_VELOCITY_MPS * t
-    tgt = np.array([1.0, -1.0]) + TARGET_VELOCITY_MPS * t
-    return scene.render(cam, tgt), scene.camera_pose(cam + camera_offset_m), t, scene.target_box(cam, tgt)
+    tgt = TARGET_START_M + TARGET_VELOCITY_MPS * t
+    offset = np.zeros(3) if camera_offset_m is None else camera_offset_m
+    return scene.render(cam, tgt), scene.camera_pose(cam + offset), t, scene.target_box(cam, tgt)
 
 
 def _warmed_up(guidance: bool = True, seed: int = 0) -> tuple[PlanarScene, TradePipeline]:
