@@ -17,9 +17,9 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from agents.obs_flatten import N_FEATURES
+from trade_gym.action import ACTION_DIM
 
 OPSET = 17  # supported by the venv's onnxruntime (1.17+ runs opset <= 20)
-ENV_ACTION_DIM = 4
 INPUT_NAME = "features"
 OUTPUT_NAME = "action"
 VERIFY_SAMPLES = 256
@@ -33,10 +33,10 @@ class DeterministicActor(torch.nn.Module):
         super().__init__()
         self.policy = model.policy
         self.is_ppo = isinstance(self.policy, ActorCriticPolicy)
-        self.pad = ENV_ACTION_DIM - int(model.action_space.shape[0])
+        self.pad = ACTION_DIM - int(model.action_space.shape[0])
         if self.pad < 0:
-            raise ValueError(f"policy action dim {model.action_space.shape[0]} exceeds the env's {ENV_ACTION_DIM}")
-        self.register_buffer("embed", torch.eye(ENV_ACTION_DIM - self.pad, ENV_ACTION_DIM))
+            raise ValueError(f"policy action dim {model.action_space.shape[0]} exceeds the env's {ACTION_DIM}")
+        self.register_buffer("embed", torch.eye(ACTION_DIM - self.pad, ACTION_DIM))
         self.register_buffer("low", torch.as_tensor(model.action_space.low, dtype=torch.float32))
         self.register_buffer("high", torch.as_tensor(model.action_space.high, dtype=torch.float32))
 
@@ -77,7 +77,7 @@ def sb3_actions(model: BaseAlgorithm, features: np.ndarray) -> np.ndarray:
     """SB3's own deterministic actions (N, 4) for features (N, F), yaw padded like the export."""
     action, _ = model.predict(np.asarray(features, np.float32), deterministic=True)
     action = np.asarray(action, np.float32).reshape(len(features), -1)
-    pad = ENV_ACTION_DIM - action.shape[1]
+    pad = ACTION_DIM - action.shape[1]
     return np.concatenate([action, np.zeros((len(action), pad), np.float32)], axis=1)
 
 

@@ -15,11 +15,11 @@ import onnxruntime as ort
 from agents.obs_flatten import N_FEATURES, flatten_observation
 from trade.model_file import ModelFileError, check_sha256_format, open_verified_session
 from assets import ASSETS_DIR
+from trade_gym.action import ACTION_DIM
 
 DEFAULT_POLICY = ASSETS_DIR / "policies" / "follower_ppo.onnx"
 # SHA-256 of the shipped policy, printed by `python -m agents.train` and recorded in follower_ppo.md
 DEFAULT_POLICY_SHA256 = "385343ea465a41a1b14b5b5a12d0b7fb41180b7136ab01c4d3ae1eb0c54ae050"
-ACTION_DIM = 4
 
 
 class AgentError(Exception):

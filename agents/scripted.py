@@ -11,9 +11,10 @@ from typing import Any
 
 import numpy as np
 
-# Action scale of TradeFollow-v0 (QuadrotorConfig limits): m/s per unit action.
-DEFAULT_MAX_SPEED_HORIZONTAL_MPS = 8.0
-DEFAULT_MAX_SPEED_VERTICAL_MPS = 3.0
+from trade.validation import require
+from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, DEFAULT_ACTION_SCALE
+from trade_gym.config import CAMERA_PITCH_RANGE_DEG, EnvConfig
+
 
 
 @dataclass(frozen=True)
@@ -24,18 +25,19 @@ class ScriptedFollowerConfig:
     image_gain_mps: float = 6.0  # before a 3D estimate exists: speed per half-image offset of the box
     height_gain_per_s: float = 0.6
     velocity_feedforward: float = 1.0
-    camera_pitch_deg: float = 90.0
-    max_speed_horizontal_mps: float = DEFAULT_MAX_SPEED_HORIZONTAL_MPS
-    max_speed_vertical_mps: float = DEFAULT_MAX_SPEED_VERTICAL_MPS
+    camera_pitch_deg: float = EnvConfig.camera_pitch_deg  # must match the env's
+    # the env's action scale (`env.action_scale`) [m/s per unit action]
+    max_speed_horizontal_mps: float = DEFAULT_ACTION_SCALE.horizontal_mps
+    max_speed_vertical_mps: float = DEFAULT_ACTION_SCALE.vertical_mps
 
     def __post_init__(self) -> None:
         for name in ("position_gain_per_s", "height_gain_per_s", "image_gain_mps", "max_speed_horizontal_mps",
                      "max_speed_vertical_mps"):
             value = getattr(self, name)
-            if not np.isfinite(value) or value <= 0:
-                raise ValueError(f"ScriptedFollowerConfig.{name} must be > 0, got {value!r}")
-        if not 30.0 <= self.camera_pitch_deg <= 90.0:
-            raise ValueError(f"camera_pitch_deg must be in [30, 90], got {self.camera_pitch_deg!r}")
+            require(np.isfinite(value) and value > 0, f"ScriptedFollowerConfig.{name}", value, "> 0")
+        low, high = CAMERA_PITCH_RANGE_DEG
+        require(low <= self.camera_pitch_deg <= high, "ScriptedFollowerConfig.camera_pitch_deg", self.camera_pitch_deg,
+                f"in [{low}, {high}] (the env's range)")
 
 
 class ScriptedFollower:
@@ -83,12 +85,12 @@ class ScriptedFollower:
         the feature triangulation its baseline."""
         cfg = self.config
         if not np.any(bbox_norm):
-            return np.zeros(4)
+            return np.zeros(ACTION_DIM)
         offset = 2.0 * (bbox_norm[:2] - 0.5)  # (right, down) in half-image units
         v_forward, v_left = -cfg.image_gain_mps * offset[1], -cfg.image_gain_mps * offset[0]
         return np.array([
-            np.clip(v_forward / cfg.max_speed_horizontal_mps, -1.0, 1.0),
-            np.clip(v_left / cfg.max_speed_horizontal_mps, -1.0, 1.0),
+            np.clip(v_forward / cfg.max_speed_horizontal_mps, ACTION_LOW, ACTION_HIGH),
+            np.clip(v_left / cfg.max_speed_horizontal_mps, ACTION_LOW, ACTION_HIGH),
             0.0,
             0.0,
         ])
@@ -96,15 +98,15 @@ class ScriptedFollower:
     def _act(self, rel: np.ndarray, vel: np.ndarray, hold_height_m: float) -> np.ndarray:
         cfg = self.config
         if not np.isfinite(hold_height_m):
-            return np.zeros(4)
+            return np.zeros(ACTION_DIM)
         # Desired horizontal offset: the target sits on the optical axis at the held height.
         ahead_m = hold_height_m / np.tan(np.radians(cfg.camera_pitch_deg))
         error_xy = rel[:2] - np.array([ahead_m, 0.0])
         v_xy = cfg.velocity_feedforward * vel[:2] + cfg.position_gain_per_s * error_xy
         v_z = cfg.height_gain_per_s * (hold_height_m - (-rel[2]))
         return np.array([
-            np.clip(v_xy[0] / cfg.max_speed_horizontal_mps, -1.0, 1.0),
-            np.clip(v_xy[1] / cfg.max_speed_horizontal_mps, -1.0, 1.0),
-            np.clip(v_z / cfg.max_speed_vertical_mps, -1.0, 1.0),
+            np.clip(v_xy[0] / cfg.max_speed_horizontal_mps, ACTION_LOW, ACTION_HIGH),
+            np.clip(v_xy[1] / cfg.max_speed_horizontal_mps, ACTION_LOW, ACTION_HIGH),
+            np.clip(v_z / cfg.max_speed_vertical_mps, ACTION_LOW, ACTION_HIGH),
             0.0,
         ])

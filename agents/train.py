@@ -1,7 +1,7 @@
 """Training of learned followers with stable-baselines3 (PPO or SAC) on the oracle perception mode.
 
 Owns `TrainConfig`, the vectorised training envs (`agents.training_env`: scene and world seed drawn per
-episode), the PPO warm start and critic warm-up, and `python -m agents.train --steps N --out DIR`, which writes
+episode), the PPO warm start and critic warm-up, and `python -m agents.train --out DIR` (settings from `agents/hyperparams/<algo>.yml`), which writes
 the SB3 model, the ONNX policy (`agents.export`) and a JSON record of the run (seeds, steps, wall time, hash).
 """
 
@@ -11,7 +11,7 @@ import argparse
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -22,10 +22,13 @@ from agents.obs_flatten import FlatObservation
 from agents.training_env import SceneRandomizedEnv, ZeroYawAction
 from agents.warm_start import WarmStartConfig
 from trade_gym.bench.splits import require_training_worlds
+from trade.validation import check_choice, is_int_at_least, require
 from trade_gym.config import SCENE_NAMES
+from trade_gym.perception.oracle import FITTED_FIRST_FIX_DELAY_S
 
 ALGOS = ("ppo", "sac")
-FITTED_FIRST_FIX_DELAY_S = 2.6  # benchmarks/results/oracle_noise_fit.json, "fitted"
+DEFAULT_ALGO = "ppo"
+HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"  # <algo>.yml: published settings
 DEMO_SEED_OFFSET = 10_000  # demonstrations use seeds seed + 10000 + rank, apart from training's
 
 
@@ -71,24 +74,21 @@ class TrainConfig:
     verbose: int = 0  # SB3 logging to stdout (1: rollout/train statistics every update)
 
     def __post_init__(self) -> None:
-        if self.algo not in ALGOS:
-            raise ValueError(f"TrainConfig.algo must be one of {ALGOS}, got {self.algo!r}")
+        c = "TrainConfig"
+        check_choice(f"{c}.algo", self.algo, ALGOS)
         for name in ("total_steps", "n_envs", "n_steps_per_env", "batch_size", "n_epochs", "torch_threads",
                      "sde_sample_freq",
                      "sac_buffer_size", "sac_learning_starts", "sac_gradient_steps"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"TrainConfig.{name} must be an integer >= 1, got {value!r}")
-        if not self.scenes or any(s not in SCENE_NAMES for s in self.scenes):
-            raise ValueError(f"TrainConfig.scenes must be a non-empty subset of {SCENE_NAMES}, got {self.scenes!r}")
+            require(is_int_at_least(value, 1, numpy_ints=False), f"{c}.{name}", value, "an integer >= 1")
+        require(bool(self.scenes) and all(s in SCENE_NAMES for s in self.scenes), f"{c}.scenes", self.scenes,
+                f"a non-empty subset of {SCENE_NAMES}")
         for name in ("episode_duration_s", "learning_rate", "clip_range"):
-            if not np.isfinite(getattr(self, name)) or getattr(self, name) <= 0:
-                raise ValueError(f"TrainConfig.{name} must be > 0, got {getattr(self, name)!r}")
+            value = getattr(self, name)
+            require(np.isfinite(value) and value > 0, f"{c}.{name}", value, "> 0")
         for name in ("gamma", "gae_lambda"):
-            if not 0.0 < getattr(self, name) <= 1.0:
-                raise ValueError(f"TrainConfig.{name} must be in (0, 1], got {getattr(self, name)!r}")
-        if not np.isfinite(self.ent_coef) or self.ent_coef < 0:
-            raise ValueError(f"TrainConfig.ent_coef must be >= 0, got {self.ent_coef!r}")
+            require(0.0 < getattr(self, name) <= 1.0, f"{c}.{name}", getattr(self, name), "in (0, 1]")
+        require(np.isfinite(self.ent_coef) and self.ent_coef >= 0, f"{c}.ent_coef", self.ent_coef, ">= 0")
         if self.warm_start is not None and self.algo != "ppo":
             raise ValueError(f"TrainConfig.warm_start needs algo='ppo', got algo={self.algo!r}")
         if self.critic_warmup_steps < 0 or (self.warm_start is not None
@@ -98,8 +98,8 @@ class TrainConfig:
         if self.checkpoint_every_steps < 0 or self.verbose not in (0, 1, 2):
             raise ValueError(f"TrainConfig.checkpoint_every_steps must be >= 0 and verbose 0, 1 or 2, got "
                              f"{self.checkpoint_every_steps!r} and {self.verbose!r}")
-        if not self.hidden_units or any(int(h) < 1 for h in self.hidden_units):
-            raise ValueError(f"TrainConfig.hidden_units must be positive layer widths, got {self.hidden_units!r}")
+        require(bool(self.hidden_units) and all(int(h) >= 1 for h in self.hidden_units), f"{c}.hidden_units",
+                self.hidden_units, "positive layer widths")
         world_seed = dict(self.env_kwargs).get("world_seed")
         if world_seed is not None:  # training draws its worlds from the training split; a fixed one must be too
             require_training_worlds([world_seed], "TrainConfig.env_kwargs world_seed")
@@ -243,37 +243,82 @@ def _parse_env_kwarg(text: str) -> tuple[str, Any]:
         return key, value
 
 
-def main(argv: list[str] | None = None) -> None:
-    defaults = TrainConfig()
-    parser = argparse.ArgumentParser(description="Train a learned follower (SB3) on the oracle perception and "
-                                                 "export it to ONNX.")
-    parser.add_argument("--steps", type=int, default=defaults.total_steps, help="environment steps in total")
+def hyperparams_path(algo: str) -> Path:
+    """The published hyperparameters of `algo` (agents/hyperparams/<algo>.yml)."""
+    return HYPERPARAMS_DIR / f"{algo}.yml"
+
+
+def load_train_config(path: str | Path) -> TrainConfig:
+    """The TrainConfig a hyperparameter file describes; it must name every TrainConfig field, and only those."""
+    import yaml
+
+    path = Path(path)
+    data = yaml.safe_load(path.read_text())
+    names = [f.name for f in fields(TrainConfig)]
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a mapping of TrainConfig fields, got {type(data).__name__}")
+    unknown, missing = sorted(set(data) - set(names)), [n for n in names if n not in data]
+    if unknown or missing:
+        raise ValueError(f"{path}: every TrainConfig field, and only those, must be given; unknown {unknown}, "
+                         f"missing {missing}")
+    values = dict(data)
+    values["scenes"], values["hidden_units"] = tuple(data["scenes"]), tuple(data["hidden_units"])
+    values["env_kwargs"] = tuple(dict(data["env_kwargs"] or {}).items())
+    if data["warm_start"] is not None:
+        values["warm_start"] = WarmStartConfig(**data["warm_start"])
+    return TrainConfig(**values)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description="Train a learned follower (SB3) on the oracle perception and the "
+                                                 "env's own reward, and export it to ONNX. Every setting comes "
+                                                 "from a hyperparameter file; the flags override single values.")
     parser.add_argument("--out", type=Path, required=True, help="directory for model.zip, policy.onnx, record")
-    parser.add_argument("--algo", choices=ALGOS, default=defaults.algo)
-    parser.add_argument("--n-envs", type=int, default=defaults.n_envs, help="SubprocVecEnv workers")
-    parser.add_argument("--seed", type=int, default=defaults.seed)
-    parser.add_argument("--scenes", nargs="+", default=list(defaults.scenes), choices=SCENE_NAMES)
-    parser.add_argument("--episode-duration-s", type=float, default=defaults.episode_duration_s)
+    parser.add_argument("--algo", choices=ALGOS, default=None,
+                        help="picks agents/hyperparams/<algo>.yml (default ppo); must match --hyperparams' algo")
+    parser.add_argument("--hyperparams", type=Path, default=None, metavar="YML",
+                        help="hyperparameter file (default: agents/hyperparams/<algo>.yml)")
+    parser.add_argument("--steps", type=int, default=None, help="environment steps in total")
+    parser.add_argument("--n-envs", type=int, default=None, help="SubprocVecEnv workers")
+    parser.add_argument("--seed", type=int, default=None)
+    parser.add_argument("--scenes", nargs="+", default=None, choices=SCENE_NAMES)
+    parser.add_argument("--episode-duration-s", type=float, default=None)
     parser.add_argument("--env", type=_parse_env_kwarg, action="append", default=[], metavar="KEY=VALUE",
                         help="extra gym.make kwarg (repeatable), e.g. --env oracle_dropout_prob=0.1")
     parser.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
-    parser.add_argument("--demo-steps", type=int, default=defaults.warm_start.demo_steps,
-                        help="scripted demonstrations for the PPO warm start (0: train from scratch)")
-    parser.add_argument("--critic-warmup-steps", type=int, default=defaults.critic_warmup_steps)
-    parser.add_argument("--checkpoint-every", type=int, default=0, metavar="STEPS", help="save checkpoints")
-    parser.add_argument("--verbose", type=int, default=0, choices=(0, 1, 2), help="SB3 log level")
+    parser.add_argument("--from-scratch", action="store_true",
+                        help="no warm start and no critic warm-up: PPO from a random initialisation")
+    parser.add_argument("--demo-steps", type=int, default=None, help="scripted demonstrations for the warm start")
+    parser.add_argument("--checkpoint-every", type=int, default=None, metavar="STEPS", help="save checkpoints")
+    parser.add_argument("--verbose", type=int, default=None, choices=(0, 1, 2), help="SB3 log level")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    args = parser.parse_args(argv)
-    env_kwargs = dict(defaults.env_kwargs) | dict(args.env)
-    clone = WarmStartConfig(demo_steps=args.demo_steps) if args.demo_steps > 0 and args.algo == "ppo" else None
-    config = TrainConfig(algo=args.algo, total_steps=args.steps, n_envs=args.n_envs, seed=args.seed,
-                         scenes=tuple(args.scenes), episode_duration_s=args.episode_duration_s,
-                         env_kwargs=tuple(sorted(env_kwargs.items())),
-                         tensorboard_dir=args.tensorboard,
-                         progress_bar=not args.no_progress, checkpoint_every_steps=args.checkpoint_every,
-                         verbose=args.verbose, warm_start=clone,
-                         critic_warmup_steps=args.critic_warmup_steps if clone is not None else 0)
-    record = train(config, args.out)
+    return parser
+
+
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    """The hyperparameter file's TrainConfig with the flags given applied on top."""
+    config = load_train_config(args.hyperparams or hyperparams_path(args.algo or DEFAULT_ALGO))
+    if args.algo is not None and config.algo != args.algo:
+        raise ValueError(f"--algo {args.algo} contradicts {args.hyperparams} (algo: {config.algo})")
+    overrides = {"total_steps": args.steps, "n_envs": args.n_envs, "seed": args.seed,
+                 "scenes": tuple(args.scenes) if args.scenes else None,
+                 "episode_duration_s": args.episode_duration_s, "tensorboard_dir": args.tensorboard,
+                 "checkpoint_every_steps": args.checkpoint_every, "verbose": args.verbose}
+    changes = {k: v for k, v in overrides.items() if v is not None}
+    if args.env:
+        changes["env_kwargs"] = tuple((dict(config.env_kwargs) | dict(args.env)).items())
+    if args.no_progress:
+        changes["progress_bar"] = False
+    if args.demo_steps is not None and config.warm_start is not None:
+        changes["warm_start"] = replace(config.warm_start, demo_steps=args.demo_steps)
+    if args.from_scratch:
+        changes |= {"warm_start": None, "critic_warmup_steps": 0}
+    return replace(config, **changes)
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = _parser().parse_args(argv)
+    record = train(config_from_args(args), args.out)
     summary = ("steps", "warm_start", "wall_time_s", "steps_per_s", "onnx_sha256", "onnx_bytes",
                "max_abs_onnx_minus_sb3")
     print(json.dumps({k: record[k] for k in summary}, indent=2))

@@ -9,10 +9,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from trade_gym.action import ACTION_NAMES, action_space
 from trade_gym.bench.splits import TRAINING
 from trade_gym.env import TradeFollowEnv
 
-TRAIN_ACTION_DIM = 3  # forward, left, up; the yaw rate is held at 0 (rotating the image hurts the tracker)
+# forward, left, up: the env's action without its last component, the yaw rate, held at 0 (rotating the image hurts
+# the tracker)
+TRAIN_ACTION_DIM = ACTION_NAMES.index("yaw_rate")
 
 
 class SceneRandomizedEnv(gym.Env):
@@ -57,7 +60,7 @@ class ZeroYawAction(gym.ActionWrapper):
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (TRAIN_ACTION_DIM,), np.float32)
+        self.action_space = action_space(TRAIN_ACTION_DIM)
 
     def action(self, action: np.ndarray) -> np.ndarray:
         return np.append(np.asarray(action, np.float32), np.float32(0.0))

@@ -15,6 +15,7 @@ import torch
 
 from agents.obs_flatten import flatten_observation
 from agents.scripted import ScriptedFollower
+from trade.validation import is_int_at_least, require
 
 FloatArray = npt.NDArray[np.float32]
 CLONED_DIMS = 3  # forward, left, up; yaw stays zero
@@ -45,12 +46,11 @@ class WarmStartConfig:
     def __post_init__(self) -> None:
         for name in ("demo_steps", "epochs", "batch_size"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"WarmStartConfig.{name} must be an integer >= 1, got {value!r}")
-        if not np.isfinite(self.action_noise_std) or self.action_noise_std < 0:
-            raise ValueError(f"WarmStartConfig.action_noise_std must be >= 0, got {self.action_noise_std!r}")
-        if not np.isfinite(self.learning_rate) or self.learning_rate <= 0:
-            raise ValueError(f"WarmStartConfig.learning_rate must be > 0, got {self.learning_rate!r}")
+            require(is_int_at_least(value, 1, numpy_ints=False), f"WarmStartConfig.{name}", value, "an integer >= 1")
+        require(np.isfinite(self.action_noise_std) and self.action_noise_std >= 0, "WarmStartConfig.action_noise_std",
+                self.action_noise_std, ">= 0")
+        require(np.isfinite(self.learning_rate) and self.learning_rate > 0, "WarmStartConfig.learning_rate",
+                self.learning_rate, "> 0")
 
 
 def collect_demonstrations(vec_env, config: WarmStartConfig, rng: np.random.Generator,

@@ -57,7 +57,7 @@ class PipelineConfig:
     # Depth-only mode of the paper's Table 2: the target depth read from the aligned single-image depth map
     # at the box (no plane fit, fusion or raycast; temporal_fusion is unused, ground_mask must be off).
     single_image_depth: bool = False
-    depth_alignment_ransac: bool = True  # depth-only alignment by 2-point RANSAC; False: plain least squares
+    depth_only_ransac: bool = True  # depth-only alignment by 2-point RANSAC; False: plain least squares
     object_height_m: float = 1.5  # prior object height; the plane is lifted by half of it
     # Use the ground mask's object height estimate for the lift instead of the prior. Off: on the
     # desert (seed 0, 300 frames) it raised the target-depth RMSE from 0.12 m to 0.51 m.
@@ -160,7 +160,7 @@ class TradePipeline:
         self.ground = (GroundFilter(config.ground_filter, intrinsics, depth_model, rng)
                        if config.ground_mask else None)
         self.depth_only = (DepthOnlyLocaliser(config.depth_only, intrinsics, depth_model, rng,
-                                              config.depth_alignment_ransac)
+                                              config.depth_only_ransac)
                            if config.single_image_depth else None)
         self._object_height_m = config.object_height_m
         self._tracked: TrackedFrame | None = None  # the last tracked frame (None before initialise)

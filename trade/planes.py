@@ -10,21 +10,14 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from trade.validation import is_int_at_least, require
+
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
 SAMPLE_SIZE = 3  # points per minimal plane hypothesis
 MIN_SAMPLE_SIN = 1e-3  # |e1 x e2| / (|e1||e2|) below this: collinear sample, discarded
 MIN_NORMAL_Z = 1e-12  # below this a plane is vertical: its height at an (x, y) is undefined
-
-
-def _require(ok: bool, owner: str, name: str, value: object, expectation: str) -> None:
-    if not ok:
-        raise ValueError(f"{owner}.{name} must be {expectation}, got {value!r}")
-
-
-def _is_int_at_least(value: object, lowest: int) -> bool:
-    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= lowest
 
 
 @dataclass(frozen=True)
@@ -39,8 +32,8 @@ class Plane:
     def __post_init__(self) -> None:
         n = np.asarray(self.normal, dtype=np.float64).reshape(3)
         norm = float(np.linalg.norm(n))
-        _require(np.isfinite(norm) and norm > 0.0, "Plane", "normal", self.normal, "finite and non-zero")
-        _require(bool(np.isfinite(self.offset_m)), "Plane", "offset_m", self.offset_m, "finite")
+        require(np.isfinite(norm) and norm > 0.0, "Plane.normal", self.normal, "finite and non-zero")
+        require(bool(np.isfinite(self.offset_m)), "Plane.offset_m", self.offset_m, "finite")
         sign = -1.0 if n[2] < 0.0 else 1.0  # orient n_z >= 0; (n, d) and (-n, -d) are the same plane
         object.__setattr__(self, "normal", sign * n / norm)
         object.__setattr__(self, "offset_m", sign * float(self.offset_m) / norm)
@@ -119,12 +112,12 @@ class MultiRansacConfig:
     def __post_init__(self) -> None:
         checks = {  # field: (valid, expectation)
             "inlier_threshold_m": (0.0 < self.inlier_threshold_m < np.inf, "finite and > 0"),
-            "max_solutions": (_is_int_at_least(self.max_solutions, 1), "an integer >= 1"),
-            "max_iterations": (_is_int_at_least(self.max_iterations, 1), "an integer >= 1"),
-            "min_iterations": (_is_int_at_least(self.min_iterations, 1) and self.min_iterations
+            "max_solutions": (is_int_at_least(self.max_solutions, 1), "an integer >= 1"),
+            "max_iterations": (is_int_at_least(self.max_iterations, 1), "an integer >= 1"),
+            "min_iterations": (is_int_at_least(self.min_iterations, 1) and self.min_iterations
                                <= self.max_iterations, "an integer in [1, max_iterations]"),
-            "hypotheses_per_chunk": (_is_int_at_least(self.hypotheses_per_chunk, 1), "an integer >= 1"),
-            "n_refine_iterations": (_is_int_at_least(self.n_refine_iterations, 0), "an integer >= 0"),
+            "hypotheses_per_chunk": (is_int_at_least(self.hypotheses_per_chunk, 1), "an integer >= 1"),
+            "n_refine_iterations": (is_int_at_least(self.n_refine_iterations, 0), "an integer >= 0"),
             "min_normal_angle_deg": (0.0 <= self.min_normal_angle_deg <= 90.0, "in [0, 90]"),
             "flatness_tolerance_deg": (0.0 <= self.flatness_tolerance_deg <= 90.0, "in [0, 90]"),
             "max_ground_tilt_deg": (0.0 <= self.max_ground_tilt_deg <= 90.0, "in [0, 90]"),
@@ -134,7 +127,7 @@ class MultiRansacConfig:
             "parallel_min_separation_m": (self.parallel_min_separation_m > 0.0, "> 0 (inf: paper's rule)"),
         }
         for name, (valid, expectation) in checks.items():
-            _require(bool(valid), "MultiRansacConfig", name, getattr(self, name), expectation)
+            require(bool(valid), f"MultiRansacConfig.{name}", getattr(self, name), expectation)
 
 
 @dataclass(frozen=True)

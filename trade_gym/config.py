@@ -6,11 +6,14 @@ an error naming the parameter and the value.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
+from trade.validation import (check_choice, check_non_negative, check_positive, check_range, is_int_at_least,
+                             nested_config, require)
+from trade_gym.perception.oracle import OracleConfig
 from trade_gym.reward import RewardConfig
+from trade_gym.sim.pose_source import VioConfig
+from trade_gym.sim.quadrotor import QuadrotorConfig
 
 PERCEPTION_MODES = ("trade", "dcf", "oracle")
 POSE_SOURCES = ("gt", "vio")
@@ -20,9 +23,15 @@ SCENE_NAMES = ("desert", "city", "mountain")
 # after the stack's own measured compute time for that frame.
 LATENCY_MODES = ("none", "fixed", "measured")
 MS_PER_S = 1000.0
+# EnvConfig's fields that hold a component's whole config (given as the config or a mapping of its fields)
+NESTED_CONFIGS = {"reward": RewardConfig, "quadrotor": QuadrotorConfig, "vio": VioConfig}
+ORACLE_PREFIX = "oracle_"  # EnvConfig's oracle_<name> is OracleConfig's <name>
 
 PHYSICS_RATE_HZ = 240
 CAMERA_RATE_HZ = 30
+MIN_CAMERA_SIZE_PX = 16
+CAMERA_FOV_RANGE_DEG = (10.0, 170.0)
+CAMERA_PITCH_RANGE_DEG = (30.0, 90.0)  # 90 = straight down
 
 
 @dataclass(frozen=True)
@@ -52,16 +61,15 @@ class EnvConfig:
     # None: each reset's seed draws the world too. An int fixes the world (the "sequence") while the
     # reset seed still drives sensor noise, the start shift and the box perturbation (repeated runs).
     world_seed: int | None = None
-    # Oracle noise model (perception="oracle"). Defaults fitted to full TRADE's closed-loop errors on training
-    # worlds (benchmarks/fit_oracle_noise.py: median over scenes; results/oracle_noise_fit.json).
-    oracle_box_sigma_px: float = 1.725  # box jitter per x, y, w, h [px]
-    oracle_depth_sigma_frac: float = 0.0136  # target position noise per camera axis, fraction of depth
-    oracle_velocity_sigma_mps: float = 0.446  # target velocity noise per axis [m/s]
-    oracle_dropout_prob: float = 0.0  # chance per frame that the estimate is missing
-    oracle_noise_correlation_s: float = 0.564  # correlation time of the noise above [s]; 0 = white
-    # No 3D position/velocity this long after reset [s]. Fitted: 2.6 s (agents.train trains with it); the
-    # default stays 0 because the estimate's NaN depth in info defeats gymnasium's check_env (NaN != NaN).
-    oracle_first_fix_delay_s: float = 0.0
+    # Oracle noise model (perception="oracle"): oracle_<name> is OracleConfig's <name> (`self.oracle`), with its
+    # defaults (fitted to full TRADE's closed-loop errors on training worlds; see OracleConfig).
+    oracle_box_sigma_px: float = OracleConfig.box_sigma_px  # box jitter per x, y, w, h [px]
+    oracle_depth_sigma_frac: float = OracleConfig.depth_sigma_frac  # position noise per camera axis / depth
+    oracle_velocity_sigma_mps: float = OracleConfig.velocity_sigma_mps  # target velocity noise per axis [m/s]
+    oracle_dropout_prob: float = OracleConfig.dropout_prob  # chance per frame that the estimate is missing
+    oracle_noise_correlation_s: float = OracleConfig.noise_correlation_s  # of the noise above [s]; 0 = white
+    # No 3D position/velocity this long after reset [s] (fitted: FITTED_FIRST_FIX_DELAY_S, not the default)
+    oracle_first_fix_delay_s: float = OracleConfig.first_fix_delay_s
     imu_noise: bool = True
     render_oracle_frames: bool = False  # render the camera even in oracle mode (for the GT box)
     # Perception latency (`trade_gym.latency`): "none" (the estimate of a frame is in that frame's observation),
@@ -69,40 +77,46 @@ class EnvConfig:
     # compute time for that frame: not deterministic). perception_latency_ms only with "fixed" [ms].
     perception_latency: str = "none"
     perception_latency_ms: float | None = None
-    # The reward's weights (`trade_gym.reward`): a RewardConfig or a mapping of its fields.
+    # Components' configs, each a config or a mapping of its fields (NESTED_CONFIGS): the reward's weights
+    # (`trade_gym.reward`); the airframe, setpoint limits (the action scale, `trade_gym.action`) and controller
+    # gains; the VIO pose drift (pose_source="vio").
     reward: RewardConfig = field(default_factory=RewardConfig)
+    quadrotor: QuadrotorConfig = field(default_factory=QuadrotorConfig)
+    vio: VioConfig = field(default_factory=VioConfig)
 
     def __post_init__(self) -> None:
-        if isinstance(self.reward, Mapping):
-            object.__setattr__(self, "reward", RewardConfig(**self.reward))
-        if not isinstance(self.reward, RewardConfig):
-            raise ValueError(f"reward must be a RewardConfig or a mapping of its fields, got {self.reward!r}")
-        _check_choice("scene", self.scene, SCENE_NAMES)
-        _check_choice("perception", self.perception, PERCEPTION_MODES)
-        _check_choice("pose_source", self.pose_source, POSE_SOURCES)
-        _check_choice("render_mode", self.render_mode, RENDER_MODES)
+        for name, config_type in NESTED_CONFIGS.items():
+            object.__setattr__(self, name, nested_config(name, getattr(self, name), config_type))
+        check_choice("scene", self.scene, SCENE_NAMES)
+        check_choice("perception", self.perception, PERCEPTION_MODES)
+        check_choice("pose_source", self.pose_source, POSE_SOURCES)
+        check_choice("render_mode", self.render_mode, RENDER_MODES)
         _check_latency(self.perception_latency, self.perception_latency_ms)
-        if isinstance(self.camera_size, bool) or not isinstance(self.camera_size, int) or self.camera_size < 16:
-            raise ValueError(f"camera_size must be an integer >= 16 [px], got {self.camera_size!r}")
-        _check_range("camera_fov_deg", self.camera_fov_deg, 10.0, 170.0)
-        _check_range("camera_pitch_deg", self.camera_pitch_deg, 30.0, 90.0)
+        require(is_int_at_least(self.camera_size, MIN_CAMERA_SIZE_PX, numpy_ints=False), "camera_size",
+                self.camera_size, f"an integer >= {MIN_CAMERA_SIZE_PX} [px]")
+        check_range("camera_fov_deg", self.camera_fov_deg, *CAMERA_FOV_RANGE_DEG)
+        check_range("camera_pitch_deg", self.camera_pitch_deg, *CAMERA_PITCH_RANGE_DEG)
         if self.target_speed_mps is not None:
-            _check_positive("target_speed_mps", self.target_speed_mps)
+            check_positive("target_speed_mps", self.target_speed_mps)
         for name in ("episode_duration_s", "lost_timeout_s"):
-            _check_positive(name, getattr(self, name))
-        _check_range("visible_fraction_threshold", self.visible_fraction_threshold, 0.0, 1.0)
+            check_positive(name, getattr(self, name))
+        check_range("visible_fraction_threshold", self.visible_fraction_threshold, 0.0, 1.0)
         for name in ("init_box_perturb_px", "oracle_box_sigma_px", "oracle_depth_sigma_frac",
                      "oracle_velocity_sigma_mps", "oracle_noise_correlation_s", "oracle_first_fix_delay_s"):
-            _check_non_negative(name, getattr(self, name))
-        _check_range("oracle_dropout_prob", self.oracle_dropout_prob, 0.0, 1.0)
-        if self.world_seed is not None and (isinstance(self.world_seed, bool) or not isinstance(self.world_seed, int)
-                                            or self.world_seed < 0):
-            raise ValueError(f"world_seed must be None or an integer >= 0, got {self.world_seed!r}")
-        if not isinstance(self.init_frame_shift_max, int) or self.init_frame_shift_max < 0:
-            raise ValueError(f"init_frame_shift_max must be an integer >= 0, got {self.init_frame_shift_max!r}")
+            check_non_negative(name, getattr(self, name))
+        check_range("oracle_dropout_prob", self.oracle_dropout_prob, 0.0, 1.0)
+        require(self.world_seed is None or is_int_at_least(self.world_seed, 0, numpy_ints=False), "world_seed",
+                self.world_seed, "None or an integer >= 0")
+        require(is_int_at_least(self.init_frame_shift_max, 0, numpy_ints=False), "init_frame_shift_max",
+                self.init_frame_shift_max, "an integer >= 0")
         for f in fields(self):
-            if f.type == "bool" and not isinstance(getattr(self, f.name), bool):
-                raise ValueError(f"{f.name} must be a bool, got {getattr(self, f.name)!r}")
+            if f.type == "bool":
+                require(isinstance(getattr(self, f.name), bool), f.name, getattr(self, f.name), "a bool")
+
+    @property
+    def oracle(self) -> OracleConfig:
+        """The oracle's noise model: OracleConfig's fields from the `oracle_<field>` arguments."""
+        return OracleConfig(**{f.name: getattr(self, ORACLE_PREFIX + f.name) for f in fields(OracleConfig)})
 
     @property
     def physics_steps_per_frame(self) -> int:
@@ -127,13 +141,8 @@ class EnvConfig:
         return self.perception != "oracle" or self.render_mode is not None or self.render_oracle_frames
 
 
-def _check_choice(name: str, value: object, choices: tuple) -> None:
-    if value not in choices:
-        raise ValueError(f"{name} must be one of {choices}, got {value!r}")
-
-
 def _check_latency(mode: object, latency_ms: object) -> None:
-    _check_choice("perception_latency", mode, LATENCY_MODES)
+    check_choice("perception_latency", mode, LATENCY_MODES)
     if mode != "fixed":
         if latency_ms is not None:
             raise ValueError(f"perception_latency_ms is only used with perception_latency='fixed', got "
@@ -141,26 +150,4 @@ def _check_latency(mode: object, latency_ms: object) -> None:
         return
     if latency_ms is None:
         raise ValueError("perception_latency='fixed' needs perception_latency_ms (a number >= 0 [ms]), got None")
-    _check_non_negative("perception_latency_ms", latency_ms)
-
-
-def _check_finite_number(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    return float(value)
-
-
-def _check_positive(name: str, value: object) -> None:
-    if _check_finite_number(name, value) <= 0.0:
-        raise ValueError(f"{name} must be > 0, got {value!r}")
-
-
-def _check_non_negative(name: str, value: object) -> None:
-    if _check_finite_number(name, value) < 0.0:
-        raise ValueError(f"{name} must be >= 0, got {value!r}")
-
-
-def _check_range(name: str, value: object, low: float, high: float) -> None:
-    v = _check_finite_number(name, value)
-    if not low <= v <= high:
-        raise ValueError(f"{name} must be in [{low}, {high}], got {value!r}")
+    check_non_negative("perception_latency_ms", latency_ms)

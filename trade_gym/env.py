@@ -16,9 +16,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pybullet as p
-from gymnasium import spaces
 
 from trade.geometry import Pose
+from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, ActionScale, action_space
 from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.faults import SensorFilter
@@ -32,11 +32,10 @@ from trade_gym.scoring import EnvFrame, ScoredEstimate, env_info, reward_inputs,
 from trade_gym.sim.camera import Camera, CameraConfig, CameraFrame
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import make_pose_source
-from trade_gym.sim.quadrotor import Quadrotor, QuadrotorConfig
+from trade_gym.sim.quadrotor import Quadrotor
 from trade_gym.sim.world import World, build_world
 
 GRAVITY_MPS2 = 9.81
-ACTION_DIM = 4
 # Rays for the ground-depth truth reach this far beyond the drone's height [m].
 GROUND_RAY_RANGE_M = 1000.0
 
@@ -54,7 +53,8 @@ class TradeFollowEnv(gym.Env):
 
     ## Action Space
     `Box(-1, 1, (4,), float32)`: forward, left and up velocity in the drone's heading frame and
-    yaw rate, scaled by `QuadrotorConfig` limits (8 m/s horizontal, 3 m/s vertical, 1.5 rad/s).
+    yaw rate, scaled by the quadrotor's setpoint limits (`trade_gym.action`, `env.action_scale`; by default
+    8 m/s horizontal, 3 m/s vertical, 1.5 rad/s; `quadrotor=` sets them).
     Values beyond the bounds act as the bound; a wrong shape or a non-finite value raises
     `ValueError`.
 
@@ -94,9 +94,8 @@ class TradeFollowEnv(gym.Env):
     depth does not exist (no estimate yet, target or ground not in view: None compares equal to itself, so
     `check_env` and saved episodes compare); `est_valid`; `estimate_age_s`; `crashed`; `drone_position_m`,
     `target_position_m`; `horizontal_distance_m`; `decoy_bboxes`; `reward_<term>`. The env computes them all
-    (`trade_gym.scoring`); perception sees sensors only (the oracle reads truth through providers given at
-    construction). `ground_depth_est` is the paper's Table 1 quantity: the estimated ground's depth along the
-    ray through the true box's centre.
+    (`trade_gym.scoring`; perception sees sensors only, the oracle truth through providers given at construction);
+    `ground_depth_est`, the paper's Table 1 quantity, is the estimated ground's depth on the true box centre's ray.
 
     ## Rewards
     The task in its own units, from ground truth; the terms sum to the reward and each is in
@@ -120,7 +119,8 @@ class TradeFollowEnv(gym.Env):
     ## Arguments
     All fields of `trade_gym.config.EnvConfig`, e.g. `scene`, `perception`, `pose_source`,
     `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches,
-    `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0).
+    `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0), and
+    the components' configs `reward=`, `quadrotor=` and `vio=` (each the config or a mapping of its fields).
 
     ## Version History
     - v0: initial release.
@@ -130,7 +130,9 @@ class TradeFollowEnv(gym.Env):
     - v0, issue 17: the reward is the task: terms `visible`, `distance`, `height`, `effort`, `crash` replace
       `visible`, `centering`, `altitude`, `effort`, `crash` (centering paid for standing off the target while
       accelerating; altitude for climbing half the target's height); `reward=` sets the weights.
-    - v0, issue 18: perception sees sensors only, the env scores it; the frame guards are `trade`'s. Same values.
+    - v0, issue 18: `quadrotor=` (QuadrotorConfig: airframe, setpoint limits = action scale, gains) and `vio=`
+      (VioConfig: the VIO pose drift); the defaults are as before. Perception sees sensors only, the env scores
+      it; the frame guards are `trade`'s. Same values.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -138,22 +140,18 @@ class TradeFollowEnv(gym.Env):
     def __init__(self, **kwargs: Any) -> None:
         self.config = EnvConfig(**kwargs)
         self.render_mode = self.config.render_mode
-        self.quad_config = QuadrotorConfig()
+        self.quad_config = self.config.quadrotor
         self.camera_config = CameraConfig(
             width_px=self.config.camera_size,
             height_px=self.config.camera_size,
             fov_deg=self.config.camera_fov_deg,
             pitch_deg=self.config.camera_pitch_deg,
         )
-        self.imu_config = ImuConfig(enabled=self.config.imu_noise)
-        self.action_space = spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
+        self.imu_config = ImuConfig(noise=self.config.imu_noise)
+        self.action_space = action_space()
         self.observation_space = observation_space()
-        self._action_scale = (
-            self.quad_config.max_speed_horizontal_mps,
-            self.quad_config.max_speed_horizontal_mps,
-            self.quad_config.max_speed_vertical_mps,
-            self.quad_config.max_yaw_rate_radps,
-        )
+        self.action_scale = ActionScale.of(self.quad_config)  # what followers divide their setpoints by
+        self._action_scale = self.action_scale.per_component()
         self._client: int | None = p.connect(p.DIRECT)
         self.camera = Camera(self._client, self.camera_config)
         self._T_cam_body = self.camera.T_body_cam.inverse()
@@ -187,7 +185,7 @@ class TradeFollowEnv(gym.Env):
         self._state = self.quadrotor.read_state()
         self.imu = Imu(self.imu_config, rng)
         self._prime_imu_at_hover(rng)
-        self.pose_source = make_pose_source(self.config.pose_source, rng=rng)
+        self.pose_source = make_pose_source(self.config.pose_source, rng=rng, vio_config=self.config.vio)
         self._t_s = 0.0
         self._cache_parked_decoys()
         self._steps = 0
@@ -262,6 +260,11 @@ class TradeFollowEnv(gym.Env):
         return self._last_truth
 
     @property
+    def estimate(self) -> PerceptionOutput:
+        """The estimate the current observation holds (after any perception latency)."""
+        return self._last_estimate
+
+    @property
     def camera_frame(self) -> CameraFrame | None:
         """The current frame as rendered (true image, depth and segmentation); None when nothing was rendered."""
         return self._last_frame
@@ -303,12 +306,10 @@ class TradeFollowEnv(gym.Env):
         """The estimate this frame's observation holds, given this frame's scored estimate and the wall-clock time
         [s] perception took on it; sets its age and keeps its estimate for `render`."""
         if self._estimate_delay is None:
-            self._estimate_age_s = 0.0
-            held = scored
+            self._estimate_age_s, held = 0.0, scored
         else:
             measured = self.config.perception_latency == "measured"
-            latency_s = compute_s if measured else self.config.perception_latency_s
-            self._estimate_delay.push(scored, self._t_s, latency_s)
+            self._estimate_delay.push(scored, self._t_s, compute_s if measured else self.config.perception_latency_s)
             delivered = self._estimate_delay.deliver(self._t_s)
             self._estimate_age_s = self._t_s - delivered.frame_t_s
             held = delivered.estimate
@@ -329,7 +330,7 @@ class TradeFollowEnv(gym.Env):
         values = a.tolist()
         if not all(math.isfinite(v) for v in values):
             raise ValueError(f"action of shape ({ACTION_DIM},) must be finite, got {values}")
-        return [min(max(v, -1.0), 1.0) for v in values]
+        return [min(max(v, ACTION_LOW), ACTION_HIGH) for v in values]
 
     def _advance(self, action: list[float]) -> bool:
         """Run one camera frame of physics under the action; True if the drone crashed."""

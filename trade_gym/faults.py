@@ -18,6 +18,7 @@ import numpy.typing as npt
 
 from trade.geometry import Pose
 from trade.types import ImuBatch
+from trade.validation import is_finite_number, is_int_at_least, require
 from trade_gym.ground_truth import GroundTruth
 from trade_gym.perception.base import SensorFrame
 
@@ -59,8 +60,7 @@ class Fault:
             raise ValueError(f"Fault.kind must be one of {FAULT_KINDS}, got {self.kind!r}")
         for name, low in (("start_frame", 1), ("duration_frames", 1), ("start_jitter_frames", 0)):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-                raise ValueError(f"Fault.{name} must be an integer >= {low}, got {value!r}")
+            require(is_int_at_least(value, low), f"Fault.{name}", value, f"an integer >= {low}")
         unknown = set(self.params) - set(FAULT_PARAMS[self.kind])
         if unknown:
             raise ValueError(f"Fault.params for {self.kind!r} accepts {sorted(FAULT_PARAMS[self.kind])}, "
@@ -73,11 +73,9 @@ class Fault:
 def _check_params(kind: str, params: dict[str, Any]) -> None:
     def number(name: str, low: float, high: float = math.inf, integer: bool = False) -> None:
         v = params[name]
-        ok = not isinstance(v, bool) and isinstance(v, int if integer else (int, float))
-        if not (ok and math.isfinite(v) and low <= v <= high):
-            what = "integer" if integer else "number"
-            raise ValueError(f"Fault.params[{name!r}] for {kind!r} must be a finite {what} in [{low}, {high}], "
-                             f"got {v!r}")
+        ok = is_int_at_least(v, low, numpy_ints=False) if integer else is_finite_number(v) and low <= v
+        require(ok and v <= high, f"Fault.params[{name!r}] for {kind!r}", v,
+                f"a finite {'integer' if integer else 'number'} in [{low}, {high}]")
 
     if kind in ("blank", "occlusion"):
         number("level", 0, UINT8_LEVELS - 1, integer=True)
@@ -85,8 +83,8 @@ def _check_params(kind: str, params: dict[str, Any]) -> None:
         value, samples = params["value"], params["samples"]
         if not isinstance(value, float) or math.isfinite(value):
             raise ValueError(f"Fault.params['value'] for 'imu' must be nan or +-inf, got {value!r}")
-        if isinstance(samples, bool) or not isinstance(samples, int) or samples < 0:
-            raise ValueError(f"Fault.params['samples'] for 'imu' must be an integer >= 0, got {samples!r}")
+        require(is_int_at_least(samples, 0, numpy_ints=False), "Fault.params['samples'] for 'imu'", samples,
+                "an integer >= 0")
     if kind == "out_of_view":
         number("angle_deg", 0.0, 180.0)
     if kind == "occlusion":

@@ -20,9 +20,9 @@ never pays.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
+from trade.validation import is_finite_number, require
 from trade_gym.perception.base import FloatArray
 
 RELATIVE_ERROR_CAP = 1.0  # distance and height errors saturate at one follow height
@@ -42,8 +42,7 @@ class RewardConfig:
     def __post_init__(self) -> None:
         for name in ("visible_bonus", "distance_weight", "height_weight", "effort_weight", "crash_penalty"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-                raise ValueError(f"RewardConfig.{name} must be a finite number >= 0, got {value!r}")
+            require(is_finite_number(value) and value >= 0, f"RewardConfig.{name}", value, "a finite number >= 0")
 
     def worst_frame_loss(self) -> float:
         """The most a frame without a crash can lose: no target in view, both errors saturated, full action."""

@@ -8,7 +8,8 @@ import pytest
 import torch
 from stable_baselines3 import PPO, SAC
 
-from agents.export import ENV_ACTION_DIM, export_onnx, max_export_error, sb3_actions
+from agents.export import export_onnx, max_export_error, sb3_actions
+from trade_gym.action import ACTION_DIM
 from agents.learned import LearnedFollower
 from agents.obs_flatten import N_FEATURES, feature_space, flatten_observation
 from trade_gym.env import TradeFollowEnv
@@ -68,7 +69,7 @@ def test_export_onnx_actions_match_sb3_within_tolerance_on_env_observations(algo
     features, _ = flatten_observation(batch)
     expected = sb3_actions(model, features)
     actions, _ = follower.predict(batch)
-    assert actions.shape == (len(observations), ENV_ACTION_DIM)
+    assert actions.shape == (len(observations), ACTION_DIM)
     np.testing.assert_allclose(actions, expected, rtol=0.0, atol=MATCH_TOLERANCE)
     assert np.all(actions[:, 3] == 0.0)  # yaw rate held at zero
     assert np.all(np.abs(actions) <= 1.0)

@@ -249,7 +249,7 @@ def test_pipeline_snaps_an_initial_box_drawn_off_the_target_to_it():
     cam, tgt = np.array([0.0, 0.0, ALTITUDE_M]), np.array([1.0, -1.0])
     image, pose, gt = scene.render(cam, tgt), scene.camera_pose(cam), scene.target_box(cam, tgt)
     drawn = BBox.from_array(gt + np.array([4.0, -3.0, 0.0, 0.0]))
-    snapped = TradePipeline(PipelineConfig(tracker=GuidedTrackerConfig(snap_initial_box=True)), scene.intrinsics,
+    snapped = TradePipeline(PipelineConfig(tracker=GuidedTrackerConfig(snap_init_box=True)), scene.intrinsics,
                             np.random.default_rng(0))
     assert iou(snapped.initialise(image, drawn, pose, 0.0).box.as_array(), gt) >= 0.85
     assert iou(snapped.tracker.box.as_array(), gt) >= 0.85
@@ -264,12 +264,12 @@ def test_pipeline_keeps_the_initial_box_where_no_plausible_blob_is():
     cam = np.array([0.0, 0.0, ALTITUDE_M])
     image = scene.render(cam, np.array([40.0, 40.0]))  # the target outside the view
     drawn = BBox(50.0, 50.0, 17.0, 17.0)
-    pipeline = TradePipeline(PipelineConfig(tracker=GuidedTrackerConfig(snap_initial_box=True)), scene.intrinsics,
+    pipeline = TradePipeline(PipelineConfig(tracker=GuidedTrackerConfig(snap_init_box=True)), scene.intrinsics,
                              np.random.default_rng(0))
     kept = pipeline.initialise(image, drawn, scene.camera_pose(cam), 0.0).box
     reach_px = np.floor(GuidedTrackerConfig().snap_search_fraction * 17.0)
     assert (kept.w_px, kept.h_px) == (drawn.w_px, drawn.h_px)
     assert max(abs(kept.x_px - drawn.x_px), abs(kept.y_px - drawn.y_px)) <= reach_px
-    unsearched_config = GuidedTrackerConfig(snap_initial_box=True, snap_search_fraction=0.0)
+    unsearched_config = GuidedTrackerConfig(snap_init_box=True, snap_search_fraction=0.0)
     unsearched = TradePipeline(PipelineConfig(tracker=unsearched_config), scene.intrinsics, np.random.default_rng(0))
     assert unsearched.initialise(image, drawn, scene.camera_pose(cam), 0.0).box == drawn

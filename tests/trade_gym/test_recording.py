@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 from dataclasses import dataclass
 
 import jsonschema
@@ -170,6 +171,21 @@ def test_replay_with_an_ablation_differs_and_says_so(recorded, tmp_path, capsys)
     assert results["perception"]["switches"]["temporal_fusion"] is False
     assert "settings differ" in capsys.readouterr().err
     assert (out / results["video"]).stat().st_size > 0
+
+
+def test_replay_of_a_recording_with_the_old_setting_names_matches_its_settings(recorded, tmp_path, capsys):
+    """Recordings made before one name per switch (issue 18) name two settings depth_alignment_ransac and
+    tracker.snap_initial_box; they read under the env's names, so the replay finds the settings unchanged."""
+    old = tmp_path / "old_names"
+    shutil.copytree(recorded.path, old)
+    meta = json.loads((old / "meta.json").read_text())
+    settings = meta["perception"]["pipeline_config"]
+    settings["depth_alignment_ransac"] = settings.pop("depth_only_ransac")
+    settings["tracker"]["snap_initial_box"] = settings["tracker"].pop("snap_init_box")
+    (old / "meta.json").write_text(json.dumps(meta))
+    assert replay_main([str(old), "--out", str(tmp_path / "replay")]) == 0
+    assert json.loads((tmp_path / "replay" / "results.json").read_text())["settings_match_recording"] is True
+    assert "settings differ" not in capsys.readouterr().err
 
 
 def test_record_sequence_refuses_an_existing_episode_folder(tmp_path):

@@ -142,7 +142,7 @@ def test_imu_delivers_200hz_six_or_seven_samples_per_frame():
 
 
 def test_imu_noise_disabled_interpolates_truth_linearly():
-    imu = Imu(ImuConfig(enabled=False), np.random.default_rng(0))
+    imu = Imu(ImuConfig(noise=False), np.random.default_rng(0))
     slope, offset = np.array([1.0, -2.0, 0.5, 0.1, 0.2, -0.3]), np.array([0.0, 0.0, 9.81, 0.0, 0.0, 0.0])
     samples = []
     for step in range(1, 49):

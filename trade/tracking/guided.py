@@ -65,7 +65,7 @@ class GuidedTracker:
     def init(self, image_rgb: ImageRGB, box: BBox) -> BBox:
         """Learn the target in `box` [px] (snapped to its colour blob when configured); the box used."""
         self.refiner.init(image_rgb, box)
-        if self.config.snap_initial_box:
+        if self.config.snap_init_box:
             box = self._snapped(image_rgb, box)
         self.dcf.init(image_rgb, box)
         self._box = box

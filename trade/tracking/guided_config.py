@@ -5,12 +5,12 @@ choice, re-detection while lost, coasting box sizes and the initial-box snap, wi
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from trade.tracking.colour_box import ColourBoxConfig
 from trade.tracking.dcf import DcfConfig
 from trade.tracking.peaks import PeakConfig
+from trade.validation import require
 
 # The 99 % point of chi-square with 2 degrees of freedom: the default re-detection gate.
 CHI2_2DOF_99 = 9.21
@@ -31,7 +31,7 @@ class GuidedTrackerConfig:
     box, top peak, never lost)."""
     box_refinement: bool = True
     """Fit the output box to the target's colour blob (the DCF box keeps its first aspect ratio)."""
-    snap_initial_box: bool = False
+    snap_init_box: bool = False
     """Snap the initial box to the colour blob at its centre before the DCF learns from it. A box drawn (or
     perturbed, as in the paper's protocol) a few px off a small target otherwise teaches the DCF a template
     that is half ground, which then holds on to the ground (desert, 256 px: +-5 px is half the car's width).
@@ -88,22 +88,18 @@ class GuidedTrackerConfig:
     within 0.26, median 0.06)."""
 
     def __post_init__(self) -> None:
-        for name in ("snap_iterations", "reacquire_rings"):
-            _check(name, getattr(self, name), lambda v: int(v) == v and v >= 0, "an integer >= 0")
-        for name in ("min_peak_score", "reacquire_min_peak_score", "reacquire_confident_score"):
-            _check(name, getattr(self, name), math.isfinite, "finite")
-        _check("reacquire_gate_chi2", self.reacquire_gate_chi2, lambda v: v > 0, "> 0 (inf: no gate)")  # NaN fails
-        _check("reacquire_gate_box_sigma", self.reacquire_gate_box_sigma, lambda v: math.isfinite(v) and v > 0,
-               "finite and > 0")
-        _check("snap_search_fraction", self.snap_search_fraction, lambda v: math.isfinite(v) and v >= 0.0,
-               "finite and >= 0 (0: no search)")
-        _check("snap_max_side_ratio", self.snap_max_side_ratio, lambda v: math.isfinite(v) and v >= 1.0,
-               "finite and >= 1")
-        for name in ("second_window_offset_fraction", "reacquire_step_fraction", "coast_scale_max_relative_sigma"):
-            _check(name, getattr(self, name), lambda v: math.isfinite(v) and v > 0, "finite and > 0")
-
-
-def _check(name: str, value: float, ok: Callable[[float], bool], requirement: str) -> None:
-    """Raise ValueError naming the field and its value unless `ok(value)`."""
-    if not ok(value):
-        raise ValueError(f"GuidedTrackerConfig.{name} must be {requirement}, got {value!r}")
+        checks = {  # field: (valid, requirement), checked in this order
+            "snap_iterations": (int(self.snap_iterations) == self.snap_iterations >= 0, "an integer >= 0"),
+            "reacquire_rings": (int(self.reacquire_rings) == self.reacquire_rings >= 0, "an integer >= 0"),
+            "min_peak_score": (math.isfinite(self.min_peak_score), "finite"),
+            "reacquire_min_peak_score": (math.isfinite(self.reacquire_min_peak_score), "finite"),
+            "reacquire_confident_score": (math.isfinite(self.reacquire_confident_score), "finite"),
+            "reacquire_gate_chi2": (self.reacquire_gate_chi2 > 0, "> 0 (inf: no gate)"),  # NaN fails
+            "reacquire_gate_box_sigma": (0.0 < self.reacquire_gate_box_sigma < math.inf, "finite and > 0"),
+            "snap_search_fraction": (0.0 <= self.snap_search_fraction < math.inf, "finite and >= 0 (0: no search)"),
+            "snap_max_side_ratio": (1.0 <= self.snap_max_side_ratio < math.inf, "finite and >= 1"),
+            **{name: (0.0 < getattr(self, name) < math.inf, "finite and > 0")
+               for name in ("second_window_offset_fraction", "reacquire_step_fraction", "coast_scale_max_relative_sigma")},
+        }
+        for name, (valid, requirement) in checks.items():
+            require(bool(valid), f"GuidedTrackerConfig.{name}", getattr(self, name), requirement)

@@ -259,6 +259,9 @@ def _progress(start: float) -> Callable[[int, int, RunResult], None]:
     return show
 
 
+VIDEO_PERCEPTION = "trade"
+
+
 def write_outputs(args: argparse.Namespace, results: list[RunResult], meta: dict[str, Any]) -> dict:
     """results.json, results.md, the plots and the optional video; returns the JSON document."""
     out: Path = args.out
@@ -268,11 +271,13 @@ def write_outputs(args: argparse.Namespace, results: list[RunResult], meta: dict
         runs = [r for r in results if r.spec.group == group]
         written += plots.plot_group(runs, group, runs[0].spec.depth_kind, out)
     video = None
-    first_ok = next((r for r in results if r.error is None), None)
-    if args.video and first_ok is not None:
+    flown = [r for r in results if r.error is None]
+    # the video shows the first run with the TRADE stack (its overlays), else the first run at all
+    shown = next((r for r in flown if r.spec.perception == VIDEO_PERCEPTION), flown[0] if flown else None)
+    if args.video and shown is not None:
         from trade_gym.bench.video import record_video
 
-        video = record_video(first_ok.spec, out / "video").name
+        video = record_video(shown.spec, out / "video").name
     names = [p.name for p in written]
     document = build_document(results, summary, meta, names, video)
     titles = {g.name: g.title for g in SUITES.get(meta["suite"] or "", ())}

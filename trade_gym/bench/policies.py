@@ -9,10 +9,9 @@ from typing import Any
 import numpy as np
 
 from agents import ScriptedFollower, ScriptedFollowerConfig
+from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, DEFAULT_ACTION_SCALE, ActionScale
 from trade_gym.policy import Policy
 
-ACTION_DIM = 4  # TradeFollow-v0's action: (forward, left, up, yaw rate) in [-1, 1]
-ACTION_LOW, ACTION_HIGH = -1.0, 1.0
 POLICY_NAMES = ("scripted", "learned", "hover", "random")
 # The env seeds its generator with the run seed alone; the random policy draws from a separate
 # stream, SeedSequence((seed, RANDOM_POLICY_STREAM)), so its actions do not replay the env's draws.
@@ -56,10 +55,13 @@ def available_policies() -> tuple[str, ...]:
     return tuple(n for n in POLICY_NAMES if n != "learned" or learned_unavailable_reason() is None)
 
 
-def make_policy(name: str, seed: int, camera_pitch_deg: float) -> Policy:
-    """A fresh policy for one run; `camera_pitch_deg` must match the env's camera."""
+def make_policy(name: str, seed: int, camera_pitch_deg: float,
+                action_scale: ActionScale = DEFAULT_ACTION_SCALE) -> Policy:
+    """A fresh policy for one run; `camera_pitch_deg` and `action_scale` must be the env's."""
     if name == "scripted":
-        return ScriptedFollower(ScriptedFollowerConfig(camera_pitch_deg=camera_pitch_deg))
+        return ScriptedFollower(ScriptedFollowerConfig(camera_pitch_deg=camera_pitch_deg,
+                                                       max_speed_horizontal_mps=action_scale.horizontal_mps,
+                                                       max_speed_vertical_mps=action_scale.vertical_mps))
     if name == "hover":
         return HoverPolicy()
     if name == "random":

@@ -1,35 +1,43 @@
-"""Optional video of one benchmark run: the env's annotated frames (truth and estimate boxes,
-trajectory, features) written as mp4 (OpenCV) or, when no mp4 encoder is available, as a GIF.
+"""Optional video of one benchmark run: the annotated onboard view beside a top view, over a strip of IoU
+and depth error (`trade_gym.bench.dashboard`), written as mp4 (OpenCV) or, without an mp4 encoder, as a GIF.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import cv2
 import gymnasium as gym
 import numpy as np
 
+from trade_gym.bench.dashboard import Dashboard
 from trade_gym.bench.runner import fly
 from trade_gym.bench.suites import RunSpec
 from trade_gym.config import CAMERA_RATE_HZ
 
 MP4_FOURCC = "mp4v"
+VIDEO_PANEL_PX = 512  # onboard view and top view side; the video is twice as wide
 GIF_FRAME_STRIDE = 3  # GIF fallback keeps every 3rd frame (10 fps) to stay small
 GIF_FRAME_MS = int(1000 * GIF_FRAME_STRIDE / CAMERA_RATE_HZ)
 
 
 def record_video(spec: RunSpec, out_stem: Path) -> Path:
-    """Fly `spec` again with rendering on and write its frames to `<out_stem>.mp4` (or `.gif`).
+    """Fly `spec` again with rendering on, at a camera of at least VIDEO_PANEL_PX, and write its dashboard
+    frames (`trade_gym.bench.dashboard`) to `<out_stem>.mp4` (or `.gif`).
 
-    A separate episode from the scored one: turning rendering on changes how an oracle run finds
-    its ground truth, so the benchmark's metrics never come from this pass."""
+    A separate episode from the scored one (rendering on, and the camera may be larger), so the benchmark's
+    metrics never come from this pass."""
     frames: list[np.ndarray] = []
+    board: list[Dashboard] = []
 
     def grab(env: gym.Env, obs: dict, info: dict) -> None:
-        frames.append(env.render())
+        base = env.unwrapped
+        if not board:  # the reset: the world exists now
+            board.append(Dashboard(base.world, VIDEO_PANEL_PX, spec.steps * base.config.frame_dt_s))
+        frames.append(board[0].frame(env.render(), info, base.estimate.position_world_m))
 
-    fly(spec, on_frame=grab, render=True)
+    fly(dataclasses.replace(spec, camera_size=max(spec.camera_size, VIDEO_PANEL_PX)), on_frame=grab, render=True)
     return write_video(frames, out_stem)
 
 

@@ -8,7 +8,7 @@ from trade.geometry import CameraIntrinsics, Pose
 from trade_gym.config import EnvConfig
 from trade_gym.ground_truth import GroundTruth
 from trade_gym.perception.base import Perception
-from trade_gym.perception.oracle import OracleConfig, OraclePerception
+from trade_gym.perception.oracle import OraclePerception
 
 
 def make_perception(config: EnvConfig, intrinsics: CameraIntrinsics, ground_truth: Callable[[], GroundTruth],
@@ -16,18 +16,7 @@ def make_perception(config: EnvConfig, intrinsics: CameraIntrinsics, ground_trut
     """`ground_truth` and `true_camera_pose` (the current frame's, from the env) are handed to the oracle only
     (its noise is applied in the true camera frame); the TRADE and DCF modes see the sensors only."""
     if config.perception == "oracle":
-        return OraclePerception(
-            OracleConfig(
-                box_sigma_px=config.oracle_box_sigma_px,
-                depth_sigma_frac=config.oracle_depth_sigma_frac,
-                velocity_sigma_mps=config.oracle_velocity_sigma_mps,
-                dropout_prob=config.oracle_dropout_prob,
-                noise_correlation_s=config.oracle_noise_correlation_s,
-                first_fix_delay_s=config.oracle_first_fix_delay_s,
-            ),
-            ground_truth,
-            true_camera_pose,
-        )
+        return OraclePerception(config.oracle, ground_truth, true_camera_pose)
     from trade_gym.perception.trade_stack import TradePerception  # the stack imports OpenCV/filterpy
 
     return TradePerception(config, intrinsics)

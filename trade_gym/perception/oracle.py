@@ -15,12 +15,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from trade.geometry import Pose
+from trade.validation import require
 from trade_gym.ground_truth import GroundTruth
 from trade_gym.perception.base import FloatArray, GroundEstimate, PerceptionOutput, SensorFrame
 
 MIN_BOX_SIDE_PX = 1.0
 N_NORMAL_DRAWS = 11
 N_CORRELATED = 10  # box (4), position (3), velocity (3) follow the Gauss-Markov process; ground stays white
+# The fitted first-fix delay [s] (agents.train trains with it). OracleConfig's default stays 0: the estimate's NaN
+# depth in info before the first fix defeats gymnasium's check_env (NaN != NaN).
+FITTED_FIRST_FIX_DELAY_S = 2.6
 GROUND_DRAW = 10  # the draw for the ground's depth factor
 
 
@@ -29,23 +33,25 @@ class OracleConfig:
     """Noise model: Gaussian box jitter [px], position noise as a fraction of depth, velocity
     noise [m/s], a per-frame dropout probability (the estimate then coasts), the correlation time of
     the box, position and velocity noise [s] (first-order Gauss-Markov; 0 = white) and the delay after
-    reset before the first 3D position and velocity exist [s] (TRADE needs its ROI depths first)."""
+    reset before the first 3D position and velocity exist [s] (TRADE needs its ROI depths first).
 
-    box_sigma_px: float = 1.5
-    depth_sigma_frac: float = 0.02
-    velocity_sigma_mps: float = 0.2
+    The defaults are the one source of the env's `oracle_*` arguments: fitted to full TRADE's closed-loop errors
+    on training worlds (benchmarks/fit_oracle_noise.py: median over scenes; benchmarks/results/
+    oracle_noise_fit.json), except first_fix_delay_s (see FITTED_FIRST_FIX_DELAY_S)."""
+
+    box_sigma_px: float = 1.725
+    depth_sigma_frac: float = 0.0136
+    velocity_sigma_mps: float = 0.446
     dropout_prob: float = 0.0
-    noise_correlation_s: float = 0.0
+    noise_correlation_s: float = 0.564
     first_fix_delay_s: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("box_sigma_px", "depth_sigma_frac", "velocity_sigma_mps", "noise_correlation_s",
                      "first_fix_delay_s"):
             value = getattr(self, name)
-            if not np.isfinite(value) or value < 0:
-                raise ValueError(f"OracleConfig.{name} must be finite and >= 0, got {value!r}")
-        if not 0.0 <= self.dropout_prob <= 1.0:
-            raise ValueError(f"OracleConfig.dropout_prob must be in [0, 1], got {self.dropout_prob!r}")
+            require(0.0 <= value < math.inf, f"OracleConfig.{name}", value, "finite and >= 0")
+        require(0.0 <= self.dropout_prob <= 1.0, "OracleConfig.dropout_prob", self.dropout_prob, "in [0, 1]")
 
 
 class OraclePerception:

@@ -38,11 +38,11 @@ def pipeline_config(config: EnvConfig) -> PipelineConfig:
     """The stack's configuration for an env configuration (its ablation switches)."""
     return PipelineConfig(
         tracker=GuidedTrackerConfig(trajectory_guidance=config.trajectory_guidance and config.perception == "trade",
-                                    snap_initial_box=config.snap_init_box),
+                                    snap_init_box=config.snap_init_box),
         temporal_fusion=config.temporal_fusion,
         ground_mask=config.ground_mask,
         single_image_depth=config.single_image_depth,
-        depth_alignment_ransac=config.depth_only_ransac,
+        depth_only_ransac=config.depth_only_ransac,
     )
 
 

@@ -39,6 +39,9 @@ POS_INF, NEG_INF = "+inf", "-inf"
 RIGID_TOLERANCE = 1e-6
 BACKGROUND_INSTANCE_ID = 0  # seg/ pixels showing no vehicle (terrain, buildings, sky)
 VEHICLE_ROLES = ("target", "decoy")
+# Settings of meta.json's perception.pipeline_config renamed within format version 1 (to the env's names of the
+# same switches): a recording made before reads under the new names.
+RENAMED_SETTINGS = {"depth_alignment_ransac": "depth_only_ransac", "snap_initial_box": "snap_init_box"}
 
 
 class SequenceError(ValueError):
@@ -49,6 +52,13 @@ class SequenceError(ValueError):
         self.path, self.frame = Path(path), frame
         where = f"{path}: frame {frame}" if frame is not None else f"{path}"
         super().__init__(f"{where}: {what}")
+
+
+def current_setting_names(settings: Any) -> Any:
+    """A recorded pipeline_config (nested mappings) with each RENAMED_SETTINGS key under its new name."""
+    if not isinstance(settings, dict):
+        return settings
+    return {RENAMED_SETTINGS.get(key, key): current_setting_names(value) for key, value in settings.items()}
 
 
 def frame_file(directory: str, frame: int, suffix: str) -> str:

@@ -21,7 +21,8 @@ from trade_gym.ground_truth import GroundTruth
 from trade_gym.metrics import episode_metrics
 from trade_gym.perception.base import SensorFrame
 from trade_gym.perception.trade_stack import STACK_SWITCHES, TradePerception, pipeline_config
-from trade_gym.recording.format import META_FILE, FrameTruth, SequenceError, encode_box, encode_real, json_safe
+from trade_gym.recording.format import (META_FILE, FrameTruth, SequenceError, current_setting_names, encode_box,
+                                        encode_real, json_safe)
 from trade_gym.recording.reader import Sequence, SequenceFrame
 from trade_gym.scoring import ScoredEstimate, estimate_scores, ground_depth_along, horizontal_distance_m, score_estimate
 
@@ -199,7 +200,7 @@ def _settings_match(sequence: Sequence, settings: ReplaySettings) -> bool | None
     recorded = (sequence.meta.get("perception") or {}).get("pipeline_config")
     if recorded is None:
         return None
-    return json_safe(asdict(pipeline_config(settings.env_config()))) == recorded
+    return json_safe(asdict(pipeline_config(settings.env_config()))) == current_setting_names(recorded)
 
 
 def _warnings(sequence: Sequence, match: bool | None) -> list[str]:

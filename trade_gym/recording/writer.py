@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from trade.geometry import CameraIntrinsics
+from trade.validation import is_int_at_least, require
 from trade_gym.recording.format import (DEPTH_ARRAY, DEPTH_DIR, DEPTH_SUFFIX, FORMAT_NAME, FORMAT_VERSION,
                                         FRAMES_FILE, KINDS, META_FILE, RGB_DIR, RGB_SUFFIX, SEG_DIR, SEG_SUFFIX,
                                         BACKGROUND_INSTANCE_ID, FrameRecord, encode_box, encode_intrinsics,
@@ -257,8 +258,8 @@ class SequenceWriter:
 
 def check_png_compression(level: object) -> None:
     """ValueError unless `level` is an integer PNG compression level in [0, MAX_PNG_COMPRESSION]."""
-    if isinstance(level, bool) or not isinstance(level, int) or not 0 <= level <= MAX_PNG_COMPRESSION:
-        raise ValueError(f"png_compression must be an integer in [0, {MAX_PNG_COMPRESSION}], got {level!r}")
+    require(is_int_at_least(level, 0, numpy_ints=False) and level <= MAX_PNG_COMPRESSION, "png_compression", level,
+            f"an integer in [0, {MAX_PNG_COMPRESSION}]")
 
 
 def instance_lookup(body_ids: list[int]) -> np.ndarray:

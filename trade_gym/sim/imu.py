@@ -13,6 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from trade.types import ImuBatch
+from trade.validation import require
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -34,7 +35,7 @@ class ImuConfig:
     0.01 deg/s/sqrt(Hz) = 1.75e-4 rad/s/sqrt(Hz)); bias random walks of a consumer MEMS IMU as in the
     VINS-Mono defaults (accel 4e-5 m/s^3/sqrt(Hz), gyro 2e-6 rad/s^2/sqrt(Hz)); initial biases of a
     calibrated unit. Discrete model per sample: white sigma = density * sqrt(rate_hz); bias step sigma =
-    random_walk * sqrt(1 / rate_hz). `enabled=False` switches noise and bias off: the IMU then
+    random_walk * sqrt(1 / rate_hz). `noise=False` switches noise and bias off: the IMU then
     delivers the interpolated truth (still at rate_hz).
     """
 
@@ -45,11 +46,10 @@ class ImuConfig:
     gyro_bias_random_walk_radps2_per_rthz: float = 2.0e-6
     accel_initial_bias_sigma_mps2: float = 0.02
     gyro_initial_bias_sigma_radps: float = 1.0e-3
-    enabled: bool = True  # noise and bias on
+    noise: bool = True  # noise and bias on (EnvConfig.imu_noise)
 
     def __post_init__(self) -> None:
-        if not math.isfinite(self.rate_hz) or self.rate_hz <= 0:
-            raise ValueError(f"ImuConfig.rate_hz must be finite and > 0, got {self.rate_hz!r}")
+        require(0.0 < self.rate_hz < math.inf, "ImuConfig.rate_hz", self.rate_hz, "finite and > 0")
         non_negative = (
             "accel_noise_density_mps2_per_rthz", "gyro_noise_density_radps_per_rthz",
             "accel_bias_random_walk_mps3_per_rthz", "gyro_bias_random_walk_radps2_per_rthz",
@@ -57,8 +57,7 @@ class ImuConfig:
         )
         for name in non_negative:
             value = getattr(self, name)
-            if not math.isfinite(value) or value < 0:
-                raise ValueError(f"ImuConfig.{name} must be finite and >= 0, got {value!r}")
+            require(0.0 <= value < math.inf, f"ImuConfig.{name}", value, "finite and >= 0")
 
     @property
     def period_s(self) -> float:
@@ -100,7 +99,7 @@ class Imu:
         self._truth: list[tuple[float, float, float, float, float, float, float]] = []
         self._weight_cache: dict[tuple, FloatArray] = {}
         sigma0 = np.repeat([cfg.accel_initial_bias_sigma_mps2, cfg.gyro_initial_bias_sigma_radps], 3)
-        self._bias = sigma0 * rng.standard_normal(_N_AXES) if cfg.enabled else np.zeros(_N_AXES)
+        self._bias = sigma0 * rng.standard_normal(_N_AXES) if cfg.noise else np.zeros(_N_AXES)
 
     @property
     def accel_bias_mps2(self) -> FloatArray:
@@ -133,7 +132,7 @@ class Imu:
         self._next_k = k_end + 1
         truth_values = np.array(truth)[:, 1:]  # (M, 6)
         values = self._weights([row[0] for row in truth], times) @ truth_values
-        if cfg.enabled:
+        if cfg.noise:
             values += self._noise(len(times))
         return ImuBatch(t_s=np.array(times), accel_mps2=values[:, :3], gyro_radps=values[:, 3:])
 

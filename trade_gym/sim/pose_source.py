@@ -12,6 +12,7 @@ from typing import Protocol
 import numpy as np
 
 from trade.geometry import Pose, rotation_z
+from trade.validation import is_finite_number, require
 
 POSE_SOURCE_NAMES = ("gt", "vio")
 
@@ -33,8 +34,7 @@ class VioConfig:
     def __post_init__(self) -> None:
         for name in ("position_drift_sigma_m_per_sqrt_m", "yaw_drift_sigma_rad_per_sqrt_m"):
             value = getattr(self, name)
-            if not math.isfinite(value) or value < 0:
-                raise ValueError(f"VioConfig.{name} must be finite and >= 0, got {value!r}")
+            require(is_finite_number(value) and value >= 0, f"VioConfig.{name}", value, "a finite number >= 0")
 
 
 class PoseSource(Protocol):

@@ -13,11 +13,14 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
+from trade.validation import is_finite_number, is_positive_number, require
+
 FloatArray = npt.NDArray[np.float64]
 
 _BODY_LINK = -1  # pybullet link index of a multibody's base
 _ORIGIN = (0.0, 0.0, 0.0)  # thrust acts at the centre of mass
 _AIRFRAME_RGBA = (0.15, 0.15, 0.15, 1.0)
+_RIGHT_ANGLE_DEG = 90.0
 _MIN_UPRIGHTNESS = 0.5  # floor on world z of body z when dividing by it (tilt is limited far below 60 deg)
 _POSITIVE_FIELDS = (
     "mass_kg", "max_speed_horizontal_mps", "max_speed_vertical_mps", "max_accel_mps2", "max_yaw_rate_radps",
@@ -53,24 +56,22 @@ class QuadrotorConfig:
     max_yaw_lead_rad: float = 0.5  # yaw setpoint may run at most this far ahead of the yaw
 
     def __post_init__(self) -> None:
+        c = "QuadrotorConfig"
         for name in ("inertia_kgm2", "half_extents_m"):
             value = getattr(self, name)
-            _require(len(value) == 3 and all(math.isfinite(v) and v > 0 for v in value), name, value,
-                     "three finite values > 0")
+            require(isinstance(value, (tuple, list)) and len(value) == 3 and all(map(is_positive_number, value)),
+                    f"{c}.{name}", value, "three finite numbers > 0")
+            object.__setattr__(self, name, tuple(value))  # a list from a mapping (JSON) becomes the tuple
         for name in _POSITIVE_FIELDS:
-            value = getattr(self, name)
-            _require(math.isfinite(value) and value > 0, name, value, "finite and > 0")
-        _require(0.0 < self.max_tilt_deg < 90.0, "max_tilt_deg", self.max_tilt_deg, "in (0, 90)")
-        _require(0.0 <= self.tilt_margin_deg < self.max_tilt_deg, "tilt_margin_deg", self.tilt_margin_deg,
-                 "in [0, max_tilt_deg)")
-        _require(0.0 < self.min_thrust_to_weight < 1.0, "min_thrust_to_weight", self.min_thrust_to_weight,
-                 "in (0, 1)")
-        _require(self.max_thrust_to_weight > 1.0, "max_thrust_to_weight", self.max_thrust_to_weight, "> 1")
-
-
-def _require(ok: bool, name: str, value: object, requirement: str) -> None:
-    if not ok:
-        raise ValueError(f"QuadrotorConfig.{name} must be {requirement}, got {value!r}")
+            require(is_positive_number(getattr(self, name)), f"{c}.{name}", getattr(self, name), "a finite number > 0")
+        require(is_positive_number(self.max_tilt_deg) and self.max_tilt_deg < _RIGHT_ANGLE_DEG, f"{c}.max_tilt_deg",
+                self.max_tilt_deg, "in (0, 90)")
+        require(is_finite_number(self.tilt_margin_deg) and 0.0 <= self.tilt_margin_deg < self.max_tilt_deg,
+                f"{c}.tilt_margin_deg", self.tilt_margin_deg, "in [0, max_tilt_deg)")
+        require(is_positive_number(self.min_thrust_to_weight) and self.min_thrust_to_weight < 1.0,
+                f"{c}.min_thrust_to_weight", self.min_thrust_to_weight, "in (0, 1)")
+        require(is_finite_number(self.max_thrust_to_weight) and self.max_thrust_to_weight > 1.0,
+                f"{c}.max_thrust_to_weight", self.max_thrust_to_weight, "> 1")
 
 
 @dataclass(frozen=True)

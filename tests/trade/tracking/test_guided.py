@@ -174,8 +174,8 @@ def test_snap_finds_a_target_whose_drawn_box_is_off_by_half_its_width_beside_a_b
     image = np.clip(cv2.GaussianBlur(road, (0, 0), 0.7), 0, 255).astype(np.uint8)
     gt = np.array([61.5, 49.5, 9.0, 23.0])
     drawn = BBox.from_array(gt + np.array([-5.0, 2.0, 0.0, 0.0]))
-    searched = GuidedTracker(GuidedTrackerConfig(snap_initial_box=True))
+    searched = GuidedTracker(GuidedTrackerConfig(snap_init_box=True))
     found = iou(searched.init(image, drawn).as_array(), gt)
-    unsearched = GuidedTracker(GuidedTrackerConfig(snap_initial_box=True, snap_search_fraction=0.0))
+    unsearched = GuidedTracker(GuidedTrackerConfig(snap_init_box=True, snap_search_fraction=0.0))
     kept = iou(unsearched.init(image, drawn).as_array(), gt)
     assert found >= 0.7 and kept <= 0.5, (found, kept)  # the blob loses the blurred 1 px rim: 7 x 21 of 9 x 23
