@@ -5,13 +5,13 @@ Owns `FrameGuardConfig`, `unusable_frame` (missing, stale, blank or frozen image
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from trade.geometry import CameraIntrinsics, Pose
+from trade.validation import check_non_negative, is_int_at_least, require
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -35,14 +35,11 @@ class FrameGuardConfig:
     out_of_view_margin_fraction: float = 0.25
 
     def __post_init__(self) -> None:
-        if isinstance(self.blank_max_range, bool) or int(self.blank_max_range) != self.blank_max_range \
-                or not 0 <= self.blank_max_range < UINT8_MAX:
-            raise ValueError(f"FrameGuardConfig.blank_max_range must be an integer in [0, {UINT8_MAX}), "
-                             f"got {self.blank_max_range!r}")
+        value = self.blank_max_range
+        require(is_int_at_least(value, 0) and value < UINT8_MAX, "FrameGuardConfig.blank_max_range", value,
+                f"an integer in [0, {UINT8_MAX})")
         for name in ("frozen_min_motion_m", "frozen_min_turn_rad", "out_of_view_margin_fraction"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"FrameGuardConfig.{name} must be finite and >= 0, got {value!r}")
+            check_non_negative(f"FrameGuardConfig.{name}", getattr(self, name))
 
 
 @dataclass(frozen=True, eq=False)

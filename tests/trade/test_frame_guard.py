@@ -91,10 +91,13 @@ def test_predicted_out_of_view_beyond_the_margin_or_behind_the_camera():
     assert predicted_out_of_view(-ahead, pose, K, 0.25)
 
 
-@pytest.mark.parametrize("blank_max_range", [-1, 255, 2.5, True])
-def test_frame_guard_config_bad_blank_range_raises_naming_it(blank_max_range):
-    with pytest.raises(ValueError, match="blank_max_range"):
-        FrameGuardConfig(blank_max_range=blank_max_range)
+@pytest.mark.parametrize("field, value", [("blank_max_range", -1), ("blank_max_range", 255), ("blank_max_range", 2.5),
+                                          ("blank_max_range", True), ("frozen_min_motion_m", -1e-3),
+                                          ("frozen_min_turn_rad", float("nan")),
+                                          ("out_of_view_margin_fraction", float("inf"))])
+def test_frame_guard_config_bad_value_raises_naming_field_and_value(field, value):
+    with pytest.raises(ValueError, match=f"FrameGuardConfig.{field} must be .*, got {value!r}"):
+        FrameGuardConfig(**{field: value})
 
 
 def test_pipeline_blank_frame_coasts_on_trajectory_and_tracks_the_next_frame():
