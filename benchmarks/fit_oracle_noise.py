@@ -29,7 +29,6 @@ from trade_gym import metrics
 from trade_gym.bench.splits import TRAINING, require_training_worlds
 from trade_gym.config import CAMERA_RATE_HZ
 from trade_gym.env import TradeFollowEnv
-from trade_gym.ground_truth import GroundTruth
 from trade_gym.perception.base import FloatArray, Perception, PerceptionOutput, SensorFrame
 from trade_gym.rollout import fly_episode
 
@@ -52,23 +51,23 @@ class FrameLog:
 
 
 class RecordingPerception:
-    """Wraps the env's perception and logs its errors against the ground truth it is given."""
+    """Wraps the env's perception and logs its errors against the env's ground truth of the frame (the wrapped
+    perception sees the sensors only)."""
 
     def __init__(self, inner: Perception, env: TradeFollowEnv, visible_threshold: float) -> None:
         self.inner, self.env, self.threshold, self.log = inner, env, visible_threshold, FrameLog()
 
-    def reset(self, sensors: SensorFrame, init_box: FloatArray, truth: GroundTruth,
-              rng: np.random.Generator) -> PerceptionOutput:
+    def reset(self, sensors: SensorFrame, init_box: FloatArray, rng: np.random.Generator) -> PerceptionOutput:
         self.log = FrameLog()
-        return self._record(self.inner.reset(sensors, init_box, truth, rng), sensors, truth)
+        return self._record(self.inner.reset(sensors, init_box, rng), sensors)
 
-    def step(self, sensors: SensorFrame, truth: GroundTruth) -> PerceptionOutput:
-        return self._record(self.inner.step(sensors, truth), sensors, truth)
+    def step(self, sensors: SensorFrame) -> PerceptionOutput:
+        return self._record(self.inner.step(sensors), sensors)
 
-    def _record(self, out: PerceptionOutput, sensors: SensorFrame, truth: GroundTruth) -> PerceptionOutput:
+    def _record(self, out: PerceptionOutput, sensors: SensorFrame) -> PerceptionOutput:
         from trade.types import iou
 
-        log = self.log
+        log, truth = self.log, self.env.ground_truth  # already this frame's while perception runs
         log.valid.append(bool(out.valid))
         log.visible.append(truth.target_visible_fraction >= self.threshold)
         log.iou_ok.append(iou(truth.target_bbox, out.bbox) >= MIN_IOU_FOR_ERRORS)

@@ -3,6 +3,8 @@
 initialise(frame, box, pose) once, then step(frame, pose, imu) per frame; each call returns a
 frozen `Estimate`. Every stage is a component with its own config; ablations are switches here.
 With `single_image_depth` the depth-only mode (paper Table 2) replaces plane fit, fusion and raycast.
+Frames the guards refuse (`trade.frame_guard`: missing, stale, blank, frozen, target predicted out of view)
+are not tracked: the pipeline coasts on its trajectory model, on recorded data as in the env.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from trade.depth_only import DepthOnlyConfig, DepthOnlyLocaliser
+from trade.frame_guard import OUT_OF_VIEW, FrameGuardConfig, TrackedFrame, predicted_out_of_view, unusable_frame
 from trade.geometry import CameraIntrinsics, Pose
 from trade.ground_filter import DepthPredictor, GroundFilter, GroundFilterConfig
 from trade.planes import MultiRansacConfig, Plane, multi_ransac
@@ -25,7 +28,7 @@ from trade.temporal_fusion import TemporalFusionConfig, TemporalPlaneFusion
 from trade.tracking.dcf import DcfTracker
 from trade.tracking.guided import GuidedTracker
 from trade.tracking.guided_config import GuidedTrackerConfig
-from trade.trajectory import TrajectoryConfig, TrajectoryModel
+from trade.trajectory import TrajectoryConfig, TrajectoryModel, TrajectoryState
 from trade.types import BBox, ImuBatch, PixelPrediction
 
 FloatArray = npt.NDArray[np.float64]
@@ -48,6 +51,7 @@ class PipelineConfig:
     raycast: RaycastConfig = field(default_factory=RaycastConfig)
     ground_filter: GroundFilterConfig = field(default_factory=GroundFilterConfig)
     depth_only: DepthOnlyConfig = field(default_factory=DepthOnlyConfig)
+    guard: FrameGuardConfig = field(default_factory=FrameGuardConfig)  # which frames are not tracked
     temporal_fusion: bool = True
     ground_mask: bool = False  # plane fit only on tracks the single-image-depth ground mask keeps
     # Depth-only mode of the paper's Table 2: the target depth read from the aligned single-image depth map
@@ -100,7 +104,8 @@ class StageTimings:
 @dataclass(frozen=True, eq=False)
 class Estimate:
     """One frame's output. box: tracked box (None when lost); position/velocity: world [m], [m/s]
-    from the trajectory model (NaN before it starts); depth: camera-frame z of the target [m]."""
+    from the trajectory model (NaN before it starts); depth: camera-frame z of the target [m]; plane and
+    depth_map_m: the ground the stack holds (on a coasting frame, the last tracked frame's)."""
 
     t_s: float
     box: BBox | None
@@ -118,6 +123,7 @@ class Estimate:
     trajectory_preview_world_m: FloatArray  # (K, 3) predicted positions ahead
     timings: StageTimings
     depth_map_m: npt.NDArray[np.float32] | None = None  # depth-only mode: aligned map (H, W) camera z [m]
+    coast_reason: str | None = None  # why the frame was not tracked (`trade.frame_guard.COAST_REASONS`); None: it was
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,8 +162,8 @@ class TradePipeline:
                                               config.depth_only_ransac)
                            if config.single_image_depth else None)
         self._object_height_m = config.object_height_m
-        self._t_s = 0.0
-        self._initialised = False
+        self._tracked: TrackedFrame | None = None  # the last tracked frame (None before initialise)
+        self._last: Estimate | None = None  # its estimate
 
     @property
     def tracker(self) -> DcfTracker:
@@ -176,24 +182,29 @@ class TradePipeline:
         if self.depth_only is not None:
             self.depth_only.reset()
         self._object_height_m = self.config.object_height_m
-        self._t_s = t_s
-        self._initialised = True
         start = time.perf_counter()
         roi = self.roi.step(cv2.cvtColor(image_rgb, cv2.COLOR_RGB2GRAY), box, T_world_cam)
         roi_ms = (time.perf_counter() - start) * 1e3
-        return self._localise(image_rgb, t_s, box, True, 1.0, False, np.full(2, np.nan), roi, T_world_cam,
-                              StageTimings(roi_ms=roi_ms))
+        est = self._localise(image_rgb, t_s, box, True, 1.0, False, np.full(2, np.nan), roi, T_world_cam,
+                             StageTimings(roi_ms=roi_ms))
+        return self._remember(est, image_rgb, T_world_cam)
 
-    def step(self, image_rgb: npt.NDArray[np.uint8], T_world_cam: Pose, t_s: float,
+    def step(self, image_rgb: npt.NDArray[np.uint8] | None, T_world_cam: Pose, t_s: float,
              imu: ImuBatch | None = None) -> Estimate:
-        """Track and localise in the next frame. `T_world_cam` comes from the pose estimator (VIO);
-        `imu` is accepted for pose estimators that fuse it and is not used by the stack itself."""
-        if not self._initialised:
+        """Track and localise in the next frame (`image_rgb` None: no image arrived). A frame the guards refuse
+        (`trade.frame_guard`) is not tracked: the estimate coasts (`coast_reason` says why) and the tracker, ROI
+        tracks and plane fit are left as they were. `T_world_cam` comes from the pose estimator (VIO); `imu` is
+        accepted for pose estimators that fuse it and is not used by the stack itself. ValueError for an image
+        that is not (H, W, 3) uint8 or a non-finite time."""
+        if self._tracked is None:
             raise RuntimeError("TradePipeline.step() before initialise()")
-        self._check_image(image_rgb)
-        if t_s <= self._t_s:
-            raise ValueError(f"frame time must increase: got t_s={t_s!r} after {self._t_s!r}")
-        self._t_s = t_s
+        if image_rgb is not None:
+            self._check_image(image_rgb)
+        if not math.isfinite(t_s):
+            raise ValueError(f"frame time must be finite, got t_s={t_s!r}")
+        reason = self._coast_reason(image_rgb, T_world_cam, t_s)
+        if reason is not None:
+            return self._coast(t_s, T_world_cam, reason)
         start = time.perf_counter()
         prediction = self._predict_pixel(t_s, T_world_cam)
         predicted_px = prediction.centre_px
@@ -203,8 +214,48 @@ class TradePipeline:
         start = time.perf_counter()
         roi = self.roi.step(cv2.cvtColor(image_rgb, cv2.COLOR_RGB2GRAY), box, T_world_cam)
         roi_ms = (time.perf_counter() - start) * 1e3
-        return self._localise(image_rgb, t_s, box if tracked else None, tracked, choice.score, choice.ambiguous,
-                              predicted_px, roi, T_world_cam, StageTimings(tracker_ms=tracker_ms, roi_ms=roi_ms))
+        est = self._localise(image_rgb, t_s, box if tracked else None, tracked, choice.score, choice.ambiguous,
+                             predicted_px, roi, T_world_cam, StageTimings(tracker_ms=tracker_ms, roi_ms=roi_ms))
+        return self._remember(est, image_rgb, T_world_cam)
+
+    # ------------------------------------------------------------------ guards
+    def _remember(self, est: Estimate, image_rgb: npt.NDArray[np.uint8], T_world_cam: Pose) -> Estimate:
+        """Keep the tracked frame (the guards compare the next frames with it) and its estimate."""
+        self._tracked = TrackedFrame(est.t_s, image_rgb, T_world_cam)
+        self._last = est
+        return est
+
+    def _predict_to(self, t_s: float) -> TrajectoryState:
+        """The trajectory model's state advanced to t_s [s]; the current state when t_s is not later."""
+        state = self.trajectory.state
+        return self.trajectory.predict(t_s) if t_s > state.t_s else state
+
+    def _coast_reason(self, image_rgb: npt.NDArray[np.uint8] | None, T_world_cam: Pose, t_s: float) -> str | None:
+        """Why this frame is not tracked (a `trade.frame_guard` reason), None when it is tracked. With trajectory
+        guidance a usable frame is still refused while the model puts the target out of view."""
+        reason = unusable_frame(image_rgb, T_world_cam, t_s, self._tracked, self.config.guard)
+        if reason is None and self.config.tracker.trajectory_guidance and self.trajectory.initialized:
+            position = self._predict_to(t_s).position_m
+            if predicted_out_of_view(position, T_world_cam, self.intrinsics,
+                                     self.config.guard.out_of_view_margin_fraction):
+                return OUT_OF_VIEW
+        return reason
+
+    def _coast(self, t_s: float, T_world_cam: Pose, reason: str) -> Estimate:
+        """A frame not tracked: the trajectory model predicts the target to t_s (NaN before its first fix), the
+        depth is that position's camera-frame z, no box; the ground is the last tracked frame's."""
+        position, velocity = np.full(3, np.nan), np.full(3, np.nan)
+        depth = float("nan")
+        if self.trajectory.initialized:
+            state = self._predict_to(t_s)
+            position, velocity = state.position_m, state.velocity_mps
+            depth = float(T_world_cam.inverse().apply(position.reshape(1, 3))[0, 2])
+        last = self._last
+        return Estimate(t_s=t_s, box=None, tracked=False, peak_score=float("nan"), ambiguous=False,
+                        predicted_px=np.full(2, np.nan), position_world_m=position, velocity_world_mps=velocity,
+                        depth_m=depth, depth_sigma_m=float("nan"), plane=last.plane,
+                        n_plane_points=last.n_plane_points, roi=None, trajectory_preview_world_m=np.zeros((0, 3)),
+                        timings=StageTimings(), depth_map_m=last.depth_map_m, coast_reason=reason)
 
     # ------------------------------------------------------------------ stages
     def _predict_pixel(self, t_s: float, T_world_cam: Pose) -> PixelPrediction:

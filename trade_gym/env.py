@@ -1,13 +1,15 @@
 """TradeFollow-v0: follow a ground vehicle from a quadrotor with a downward camera.
 
 The env owns one pybullet client and wires sim -> sensors -> perception -> observation;
-the policy's action flows back as a velocity setpoint.
+the policy's action flows back as a velocity setpoint. Perception sees the sensors only; the env scores its
+estimates against ground truth (`trade_gym.scoring`).
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import fields
 from typing import Any
 
@@ -16,17 +18,17 @@ import numpy as np
 import pybullet as p
 
 from trade.geometry import Pose
-from trade.types import iou
 from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, ActionScale, action_space
 from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
+from trade_gym.faults import SensorFilter
 from trade_gym.ground_truth import GroundTruth, VehicleBox, box_corners, compute_ground_truth
 from trade_gym.latency import EstimateDelay
-from trade_gym.metrics import depth_or_none, on_decoy
 from trade_gym.observation import build_observation, observation_space
-from trade_gym.perception.base import FloatArray, PerceptionOutput, SensorFilter, SensorFrame
+from trade_gym.perception.base import PerceptionOutput, SensorFrame
 from trade_gym.perception.factory import make_perception
-from trade_gym.reward import RewardInputs, compute_reward
+from trade_gym.reward import compute_reward
+from trade_gym.scoring import EnvFrame, ScoredEstimate, env_info, reward_inputs, score_estimate
 from trade_gym.sim.camera import Camera, CameraConfig, CameraFrame
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import make_pose_source
@@ -82,8 +84,8 @@ class TradeFollowEnv(gym.Env):
     depend on the machine and its load. The stack still processes every frame (a pipelined stack); an
     estimate that arrives after a newer one is dropped. Scoring follows what the policy sees, as VOT's
     real-time experiment does: `info`'s `est_bbox`, `iou`, `on_decoy`, `target_depth_est`, `ground_depth_est`
-    and `est_valid` are the held estimate's (computed by perception for its own frame k), compared with the
-    ground truth of the current frame; `info["estimate_age_s"]` is its age.
+    and `est_valid` are the held estimate's, compared with the ground truth of the current frame (but
+    `ground_depth_est` along frame k's true box ray, scored at frame k); `info["estimate_age_s"]` is its age.
 
     ## Info
     Ground truth and the estimate, per step: `t_s`; `gt_bbox` and `est_bbox` (x, y, w, h) [px] (`gt_bbox`
@@ -91,7 +93,9 @@ class TradeFollowEnv(gym.Env):
     `target_depth_gt`, `target_depth_est`, `ground_depth_gt`, `ground_depth_est` [m], each `None` where that
     depth does not exist (no estimate yet, target or ground not in view: None compares equal to itself, so
     `check_env` and saved episodes compare); `est_valid`; `estimate_age_s`; `crashed`; `drone_position_m`,
-    `target_position_m`; `horizontal_distance_m`; `decoy_bboxes`; `reward_<term>`.
+    `target_position_m`; `horizontal_distance_m`; `decoy_bboxes`; `reward_<term>`. The env computes them all
+    (`trade_gym.scoring`; perception sees sensors only, the oracle truth through providers given at construction);
+    `ground_depth_est`, the paper's Table 1 quantity, is the estimated ground's depth on the true box centre's ray.
 
     ## Rewards
     The task in its own units, from ground truth; the terms sum to the reward and each is in
@@ -127,7 +131,8 @@ class TradeFollowEnv(gym.Env):
       `visible`, `centering`, `altitude`, `effort`, `crash` (centering paid for standing off the target while
       accelerating; altitude for climbing half the target's height); `reward=` sets the weights.
     - v0, issue 18: `quadrotor=` (QuadrotorConfig: airframe, setpoint limits = action scale, gains) and `vio=`
-      (VioConfig: the VIO pose drift); the defaults are as before.
+      (VioConfig: the VIO pose drift); the defaults are as before. Perception sees sensors only, the env scores
+      it; the frame guards are `trade`'s. Same values.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -152,14 +157,15 @@ class TradeFollowEnv(gym.Env):
         self._T_cam_body = self.camera.T_body_cam.inverse()
         self.quadrotor = Quadrotor(self._client, self.quad_config)
         self.world: World | None = None
-        self.perception = make_perception(self.config, self.camera.intrinsics, self._true_camera_pose)
+        self.perception = make_perception(self.config, self.camera.intrinsics, self._frame_truth,
+                                          self._true_camera_pose)
         self._last_frame: CameraFrame | None = None
         self._last_truth: GroundTruth | None = None
         self._last_sensors: SensorFrame | None = None
         self._init_box: np.ndarray | None = None
         self._T_world_cam_true: Pose | None = None
         self._last_estimate = PerceptionOutput.missing()
-        self._estimate_delay: EstimateDelay | None = None
+        self._estimate_delay: EstimateDelay[ScoredEstimate] | None = None
         self._estimate_age_s = 0.0
         self._needs_reset = True
         self._sensor_filter: SensorFilter | None = None
@@ -192,18 +198,11 @@ class TradeFollowEnv(gym.Env):
         for _ in range(shift):
             self._advance([0.0] * ACTION_DIM)
         sensors, truth = self._sense()
-        sensors = self._filter_sensors(sensors, truth)
-        init_box = self._perturbed_init_box(truth.target_bbox, rng)
-        self._init_box = init_box
-        start_s = time.perf_counter()
-        estimate = self.perception.reset(sensors, init_box, truth, rng)
-        compute_s = time.perf_counter() - start_s
-        self._estimate_delay = None if self.config.perception_latency == "none" else EstimateDelay(self._t_s)
-        estimate = self._held_estimate(estimate, compute_s)
-        self._last_estimate, self._last_truth, self._last_sensors = estimate, truth, sensors
-        obs = self._observe(estimate, sensors)
-        info = self._info(truth, estimate, crashed=False, terms=None)
-        return obs, info
+        init_box = self._init_box = self._perturbed_init_box(truth.target_bbox, rng)
+        self._estimate_delay = (None if self.config.perception_latency == "none"
+                                else EstimateDelay(self._t_s, ScoredEstimate.missing()))
+        held = self._perceive(sensors, truth, lambda: self.perception.reset(sensors, init_box, rng))
+        return self._observe(held.estimate, sensors), self._info(truth, held, crashed=False, terms=None)
 
     def step(self, action):
         if self._client is None:
@@ -213,21 +212,17 @@ class TradeFollowEnv(gym.Env):
         action = self._validate_action(action)
         crashed = self._advance(action)
         sensors, truth = self._sense()
-        sensors = self._filter_sensors(sensors, truth)
-        start_s = time.perf_counter()
-        estimate = self.perception.step(sensors, truth)
-        estimate = self._held_estimate(estimate, time.perf_counter() - start_s)
-        self._time_lost_s = 0.0 if estimate.valid else self._time_lost_s + self.config.frame_dt_s
+        held = self._perceive(sensors, truth, lambda: self.perception.step(sensors))
+        self._time_lost_s = 0.0 if held.estimate.valid else self._time_lost_s + self.config.frame_dt_s
         visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
         self._time_target_hidden_s = 0.0 if visible else self._time_target_hidden_s + self.config.frame_dt_s
         self._steps += 1
-        reward, terms = compute_reward(self.config.reward, self._reward_inputs(truth, visible, action, crashed))
+        inputs = reward_inputs(truth, self.world, self._state.position_m, visible, action, crashed)
+        reward, terms = compute_reward(self.config.reward, inputs)
         terminated = crashed or self._time_target_hidden_s >= self.config.lost_timeout_s
         truncated = self._steps >= self.config.max_episode_steps and not terminated
-        self._last_estimate, self._last_truth, self._last_sensors = estimate, truth, sensors
-        obs = self._observe(estimate, sensors)
-        info = self._info(truth, estimate, crashed=crashed, terms=terms)
-        return obs, reward, terminated, truncated, info
+        obs = self._observe(held.estimate, sensors)
+        return obs, reward, terminated, truncated, self._info(truth, held, crashed=crashed, terms=terms)
 
     def render(self):
         if self.render_mode is None:
@@ -260,7 +255,8 @@ class TradeFollowEnv(gym.Env):
 
     @property
     def ground_truth(self) -> GroundTruth | None:
-        """The current frame's ground truth (as scored; a fault wrapper may lower the visible fraction in info)."""
+        """The current frame's ground truth (as scored; a fault wrapper may lower the visible fraction in info);
+        already this frame's while perception runs."""
         return self._last_truth
 
     @property
@@ -295,22 +291,30 @@ class TradeFollowEnv(gym.Env):
         self._np_random, self._np_random_seed = state["np_random"], state["np_random_seed"]
 
     # --------------------------------------------------------------- internals
-    def _held_estimate(self, estimate: PerceptionOutput, compute_s: float) -> PerceptionOutput:
-        """The estimate this frame's observation holds, given perception's estimate of this frame and the
-        wall-clock time [s] it took; sets its age."""
-        if self._estimate_delay is None:
-            self._estimate_age_s = 0.0
-            return estimate
-        measured = self.config.perception_latency == "measured"
-        self._estimate_delay.push(estimate, self._t_s, compute_s if measured else self.config.perception_latency_s)
-        held = self._estimate_delay.deliver(self._t_s)
-        self._estimate_age_s = self._t_s - held.frame_t_s
-        return held.estimate
+    def _perceive(self, sensors: SensorFrame, truth: GroundTruth,
+                  run: Callable[[], PerceptionOutput]) -> ScoredEstimate:
+        """Run perception on the frame perception receives (`sensors`) and time it, score its estimate against
+        this frame's truth; the estimate the observation holds (see `_held_estimate`)."""
+        start_s = time.perf_counter()
+        estimate = run()
+        compute_s = time.perf_counter() - start_s
+        self._last_sensors = sensors
+        return self._held_estimate(score_estimate(estimate, truth, sensors.T_world_cam, self.camera.intrinsics),
+                                   compute_s)
 
-    def _filter_sensors(self, sensors: SensorFrame, truth: GroundTruth) -> SensorFrame:
-        if self._sensor_filter is None:
-            return sensors
-        return self._sensor_filter.filter_sensors(sensors, truth)
+    def _held_estimate(self, scored: ScoredEstimate, compute_s: float) -> ScoredEstimate:
+        """The estimate this frame's observation holds, given this frame's scored estimate and the wall-clock time
+        [s] perception took on it; sets its age and keeps its estimate for `render`."""
+        if self._estimate_delay is None:
+            self._estimate_age_s, held = 0.0, scored
+        else:
+            measured = self.config.perception_latency == "measured"
+            self._estimate_delay.push(scored, self._t_s, compute_s if measured else self.config.perception_latency_s)
+            delivered = self._estimate_delay.deliver(self._t_s)
+            self._estimate_age_s = self._t_s - delivered.frame_t_s
+            held = delivered.estimate
+        self._last_estimate = held.estimate
+        return held
 
     def _require_client(self) -> int:
         if self._client is None:
@@ -349,6 +353,10 @@ class TradeFollowEnv(gym.Env):
         """The camera's exact pose at the current frame (computed once per frame in `_sense`)."""
         return self._T_world_cam_true
 
+    def _frame_truth(self) -> GroundTruth:
+        """The current frame's ground truth (computed once per frame in `_sense`): the oracle's provider."""
+        return self._last_truth
+
     def _prime_imu_at_hover(self, rng: np.random.Generator) -> None:
         """The IMU runs before the episode starts: the first observation carries the samples of one frame
         period (rounded up to whole IMU periods) taken while the drone hovered still at its start pose, so it
@@ -362,6 +370,7 @@ class TradeFollowEnv(gym.Env):
         self.imu.add_truth(0.0, hover_force_body, still)
 
     def _sense(self) -> tuple[SensorFrame, GroundTruth]:
+        """This frame's ground truth and the sensors perception receives (after any sensor filter)."""
         T_world_cam = self.camera.pose(self._state.R_world_body, self._state.position_m)
         if self._sensor_filter is not None:  # e.g. a camera knocked out of its mount: renders and truth see it
             T_world_cam = self._sensor_filter.filter_camera_pose(T_world_cam)
@@ -385,8 +394,11 @@ class TradeFollowEnv(gym.Env):
             self._decoy_ids,
             max_range_m=self._state.position_m[2] + GROUND_RAY_RANGE_M,
         )
+        self._last_truth = truth
         T_est = self.pose_source.estimate(T_world_cam, self._distance_flown_m)
         sensors = SensorFrame(self._t_s, None if frame is None else frame.rgb, T_est, self.imu.read())
+        if self._sensor_filter is not None:
+            sensors = self._sensor_filter.filter_sensors(sensors, truth)
         return sensors, truth
 
     def _vehicle_corners(self, target_box: VehicleBox) -> np.ndarray:
@@ -431,46 +443,7 @@ class TradeFollowEnv(gym.Env):
             image_size_px=self.config.camera_size,
         )
 
-    def _reward_inputs(self, truth: GroundTruth, visible: bool, action: FloatArray, crashed: bool) -> RewardInputs:
-        drone, target = self._state.position_m, truth.target_position_m
-        return RewardInputs(
-            target_visible=visible,
-            horizontal_distance_m=math.hypot(target[0] - drone[0], target[1] - drone[1]),
-            height_above_target_ground_m=float(drone[2] - self.world.ground_height_m(float(target[0]),
-                                                                                     float(target[1]))),
-            follow_height_m=self.world.spec.follow_altitude_agl_m,
-            action=action, crashed=crashed)
-
-    def _info(self, truth: GroundTruth, estimate: PerceptionOutput, crashed: bool,
+    def _info(self, truth: GroundTruth, held: ScoredEstimate, crashed: bool,
               terms: dict[str, float] | None) -> dict[str, Any]:
-        est_box = estimate.bbox.tolist()  # plain floats: scalar IoU on lists beats numpy on 4-vectors
-        est_iou = iou(truth.target_bbox.tolist(), est_box)
-        decoys_in_view = [tuple(d) for d in truth.decoy_bboxes.tolist() if d[0] == d[0]]  # k <= D, usually <= 2
-        drone = self._state.position_m
-        info: dict[str, Any] = {
-            "t_s": self._t_s,
-            # Arrays below are fresh every frame (nothing aliases them), so they are not copied.
-            "gt_bbox": truth.target_bbox,
-            "est_bbox": estimate.bbox,
-            "iou": est_iou,
-            "target_visible": truth.target_visible_fraction >= self.config.visible_fraction_threshold,
-            "target_visible_fraction": truth.target_visible_fraction,
-            "on_decoy": on_decoy(est_box, est_iou, decoys_in_view),
-            "target_depth_gt": depth_or_none(truth.target_depth_m),
-            "target_depth_est": depth_or_none(estimate.target_depth_m),
-            "ground_depth_gt": depth_or_none(truth.ground_depth_m),
-            "ground_depth_est": depth_or_none(estimate.ground_depth_m),
-            "est_valid": estimate.valid,
-            "estimate_age_s": self._estimate_age_s,
-            "crashed": crashed,
-            "drone_position_m": drone,
-            "target_position_m": truth.target_position_m,
-            "horizontal_distance_m": math.hypot(truth.target_position_m[0] - drone[0],
-                                                truth.target_position_m[1] - drone[1]),
-            # The boxes (x, y, w, h) [px] of the decoys in view, as a tuple of tuples: no NaN (check_env
-            # compares infos) and no ndarray whose shape changes per frame (vector envs stack those).
-            "decoy_bboxes": tuple(decoys_in_view),
-        }
-        for name, value in (terms or {}).items():
-            info[f"reward_{name}"] = value
-        return info
+        return env_info(truth, held, EnvFrame(self._t_s, self._state.position_m, self._estimate_age_s, crashed),
+                        self.config.visible_fraction_threshold, terms)

@@ -1,14 +1,15 @@
 """Sensor faults for TradeFollow-v0: a frame-indexed, seeded fault schedule and the wrapper that injects it.
 
-Owns `Fault` (kind, start frame, duration in frames, params), `FaultSchedule` and `SensorFaults`, a gymnasium
-Wrapper that applies a schedule through `TradeFollowEnv.set_sensor_filter` (and the depth model for its faults).
+Owns `Fault` (kind, start frame, duration in frames, params), `FaultSchedule`, the `SensorFilter` hook of the env
+and `SensorFaults`, a gymnasium Wrapper that applies a schedule through `TradeFollowEnv.set_sensor_filter` (and the
+depth model for its faults).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Protocol
 
 import cv2
 import gymnasium as gym
@@ -110,6 +111,21 @@ class FaultSchedule:
     def draw_starts(self, rng: np.random.Generator) -> tuple[int, ...]:
         """Each fault's start frame this episode: start_frame + U{0..start_jitter_frames}."""
         return tuple(f.start_frame + int(rng.integers(0, f.start_jitter_frames + 1)) for f in self.faults)
+
+
+class SensorFilter(Protocol):
+    """Transforms what the sensors deliver before perception sees it (`TradeFollowEnv.set_sensor_filter`);
+    `SensorFaults` injects faults through it. Unlike perception it sees the frame's ground truth."""
+
+    def filter_camera_pose(self, T_world_cam: Pose) -> Pose:
+        """The pose the camera actually has this frame, given its mounted pose; rendering, ground truth and
+        the pose source all use the result (e.g. a camera knocked sideways)."""
+        ...
+
+    def filter_sensors(self, sensors: SensorFrame, truth: GroundTruth) -> SensorFrame:
+        """The frame perception receives (e.g. blank, dropped: rgb None, stale, corrupt IMU samples);
+        `truth` is read-only context (where the target is)."""
+        ...
 
 
 class SensorFaults(gym.Wrapper):

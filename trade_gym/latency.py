@@ -7,45 +7,46 @@ of frame k arrives at the first frame j with t_j >= t_k + latency_k, and the obs
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-from trade_gym.perception.base import PerceptionOutput
+from typing import Generic, TypeVar
 
 # An estimate due at t counts as arrived at a frame of time >= t - tolerance [s]: the accumulated physics time
 # drifts by ~1e-15 s per frame, so a latency of a whole number of frames lands on its frame.
 ARRIVAL_TOLERANCE_S = 1e-9
 
+E = TypeVar("E")  # what is delayed: the env's scored estimate (`trade_gym.scoring.ScoredEstimate`)
+
 
 @dataclass(frozen=True)
-class Delivered:
+class Delivered(Generic[E]):
     """The estimate an observation holds and the time [s] of the frame it was computed from."""
 
-    estimate: PerceptionOutput
+    estimate: E
     frame_t_s: float
 
 
 @dataclass(frozen=True)
-class _Pending:
+class _Pending(Generic[E]):
     arrival_t_s: float
-    delivered: Delivered
+    delivered: Delivered[E]
 
 
-class EstimateDelay:
+class EstimateDelay(Generic[E]):
     """Delays each frame's estimate by its latency; `deliver(t)` returns the newest estimate (by frame time) that
     has arrived by t. An estimate arriving after a newer one is dropped (the newer one already replaced it), so
     with latencies that vary per frame the observation never goes back in time. Until the first estimate
-    arrives the observation holds `PerceptionOutput.missing()`, dated at the reset frame."""
+    arrives the observation holds `missing` (a missing estimate), dated at the reset frame."""
 
-    def __init__(self, reset_t_s: float) -> None:
-        self._pending: list[_Pending] = []
-        self._current = Delivered(PerceptionOutput.missing(), float(reset_t_s))
+    def __init__(self, reset_t_s: float, missing: E) -> None:
+        self._pending: list[_Pending[E]] = []
+        self._current = Delivered(missing, float(reset_t_s))
 
-    def push(self, estimate: PerceptionOutput, frame_t_s: float, latency_s: float) -> None:
+    def push(self, estimate: E, frame_t_s: float, latency_s: float) -> None:
         """The estimate of the frame at `frame_t_s` [s], arriving `latency_s` [s] (>= 0) later."""
         if not latency_s >= 0.0:
             raise ValueError(f"latency_s must be >= 0, got {latency_s!r}")
         self._pending.append(_Pending(frame_t_s + latency_s, Delivered(estimate, frame_t_s)))
 
-    def deliver(self, t_s: float) -> Delivered:
+    def deliver(self, t_s: float) -> Delivered[E]:
         """The estimate the observation at time `t_s` [s] holds: the newest arrived by then."""
         due = t_s + ARRIVAL_TOLERANCE_S
         arrived = [e for e in self._pending if e.arrival_t_s <= due]

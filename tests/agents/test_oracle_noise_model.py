@@ -35,12 +35,14 @@ def truth(box: np.ndarray = TRUE_BOX) -> GroundTruth:
 
 
 def run(config: OracleConfig, n_frames: int, seed: int = 0, hidden_after: int | None = None) -> list:
-    oracle = OraclePerception(config, lambda: T_WORLD_CAM)
+    now = {"truth": truth()}  # the current frame's truth, as the env's provider returns it
+    oracle = OraclePerception(config, lambda: now["truth"], lambda: T_WORLD_CAM)
     frame = lambda k: SensorFrame(k * DT_S, None, T_WORLD_CAM, EMPTY_IMU)  # noqa: E731
-    outputs = [oracle.reset(frame(0), TRUE_BOX, truth(), np.random.default_rng(seed))]
+    outputs = [oracle.reset(frame(0), TRUE_BOX, np.random.default_rng(seed))]
     for k in range(1, n_frames):
         box = np.full(4, np.nan) if hidden_after is not None and k > hidden_after else TRUE_BOX
-        outputs.append(oracle.step(frame(k), truth(box)))
+        now["truth"] = truth(box)
+        outputs.append(oracle.step(frame(k)))
     return outputs
 
 

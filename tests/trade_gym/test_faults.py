@@ -20,10 +20,8 @@ from agents import ScriptedFollower
 from trade.geometry import CameraIntrinsics, Pose
 from trade.ground_filter import GroundFilter, GroundFilterConfig
 from trade.roi_features import RoiFeatures
-from trade.types import BBox, ImuBatch
+from trade.types import BBox
 from trade_gym.faults import Fault, FaultSchedule, SensorFaults
-from trade_gym.perception.base import SensorFrame
-from trade_gym.perception.trade_stack import unusable_frame
 from trade_gym.rollout import fly_episode
 
 TRACKED_IOU = 0.3
@@ -165,25 +163,6 @@ def test_depth_model_fault_without_ground_mask_raises_value_error():
             SensorFaults(env, FaultSchedule((Fault("depth_model", 5, 5),)))
     finally:
         env.close()
-
-
-# ------------------------------------------------------------------------------ the gate in perception
-def _sensor_frame(rgb, t_s: float, x_m: float = 0.0) -> SensorFrame:
-    return SensorFrame(t_s, rgb, Pose(np.eye(3), np.array([x_m, 0.0, 10.0])), ImuBatch.empty())
-
-
-def test_unusable_frame_names_missing_stale_blank_and_frozen_frames():
-    rng = np.random.default_rng(0)
-    image = rng.integers(0, 256, (32, 32, 3), dtype=np.uint8)
-    tracked = _sensor_frame(image, 1.0)
-    assert unusable_frame(_sensor_frame(None, 2.0), tracked) == "missing"
-    assert unusable_frame(_sensor_frame(image.copy(), 1.0), tracked) == "stale"
-    assert unusable_frame(_sensor_frame(np.zeros_like(image), 2.0), tracked) == "blank"
-    assert unusable_frame(_sensor_frame(np.full_like(image, 255), 2.0), tracked) == "blank"
-    assert unusable_frame(_sensor_frame(image.copy(), 2.0, x_m=0.5), tracked) == "frozen"
-    # the same pixels from the same pose (nothing moved) and a new image are usable
-    assert unusable_frame(_sensor_frame(image.copy(), 2.0), tracked) is None
-    assert unusable_frame(_sensor_frame(rng.integers(0, 256, image.shape, dtype=np.uint8), 2.0), tracked) is None
 
 
 # ------------------------------------------------------------------------------ the depth model check

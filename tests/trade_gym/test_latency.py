@@ -109,7 +109,7 @@ def test_measured_latency_delays_every_estimate_by_whole_frames():
 
 
 def test_delay_keeps_the_newest_arrived_estimate_when_arrivals_overtake():
-    delay = EstimateDelay(0.0)
+    delay = EstimateDelay(0.0, PerceptionOutput.missing())
     slow, fast = (PerceptionOutput.missing() for _ in range(2))
     delay.push(slow, 0.0, 0.3)  # frame 0 takes 300 ms
     delay.push(fast, 0.1, 0.05)  # frame 1 takes 50 ms: arrives first

@@ -1,6 +1,7 @@
-"""Perception modes of the env: what turns sensors (and, for the oracle, ground truth) into estimates."""
+"""Perception modes of the env: what turns sensors into estimates (the oracle reads ground truth through providers
+the env gives it at construction; the env scores every mode, `trade_gym.scoring`)."""
 
-from trade_gym.perception.base import Perception, PerceptionOutput
+from trade_gym.perception.base import GroundEstimate, Perception, PerceptionOutput
 from trade_gym.perception.oracle import OracleConfig, OraclePerception
 
-__all__ = ["OracleConfig", "OraclePerception", "Perception", "PerceptionOutput"]
+__all__ = ["GroundEstimate", "OracleConfig", "OraclePerception", "Perception", "PerceptionOutput"]

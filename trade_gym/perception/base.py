@@ -1,7 +1,9 @@
-"""The contract every perception mode fulfils: one estimate of the target per camera frame.
+"""The contract every perception mode fulfils: one estimate of the target per camera frame, from the sensors only.
 
 Estimates are in the world frame as the perception believes it (so with `pose_source="vio"`
-they carry the pose drift); NaN marks what a mode could not estimate this frame.
+they carry the pose drift); NaN marks what a mode could not estimate this frame. Perception never sees ground
+truth through this contract (the oracle gets its own at construction); the env scores estimates
+(`trade_gym.scoring`).
 """
 
 from __future__ import annotations
@@ -13,28 +15,41 @@ import numpy as np
 import numpy.typing as npt
 
 from trade.geometry import Pose
+from trade.planes import Plane
 from trade.types import ImuBatch
-from trade_gym.ground_truth import GroundTruth
 
 FloatArray = npt.NDArray[np.float64]
 
 
+@dataclass(frozen=True, eq=False)
+class GroundEstimate:
+    """What a perception mode believes the ground is, so the env can score it along any pixel's ray: `plane` in
+    the world frame as perception believes it (seen from the frame's pose-source pose), or `depth_map_m` (H, W)
+    camera-frame z [m] (depth-only mode), or, for the oracle, `true_depth_factor`: its noise model's ground is the
+    true ground with every depth times this factor. None / NaN where the mode has none this frame."""
+
+    plane: Plane | None = None
+    depth_map_m: npt.NDArray[np.float32] | None = None
+    true_depth_factor: float = float("nan")
+
+
 @dataclass(frozen=True)
 class PerceptionOutput:
-    """bbox (4,) x, y, w, h [px]; world position (3,) [m] and velocity (3,) [m/s]; depths [m]."""
+    """bbox (4,) x, y, w, h [px]; world position (3,) [m] and velocity (3,) [m/s]; target depth [m] (camera-frame
+    z of the target) and its 1-sigma; the estimated ground."""
 
     bbox: FloatArray
     position_world_m: FloatArray
     velocity_world_mps: FloatArray
     target_depth_m: float
     target_depth_sigma_m: float
-    ground_depth_m: float  # estimated ground depth along the ground-truth box centre's ray
+    ground: GroundEstimate
     valid: bool  # the box is a fresh measurement this frame (not coasting)
 
     @classmethod
     def missing(cls) -> PerceptionOutput:
         nan3 = np.full(3, np.nan)
-        return cls(np.full(4, np.nan), nan3, nan3.copy(), np.nan, np.nan, np.nan, False)
+        return cls(np.full(4, np.nan), nan3, nan3.copy(), np.nan, np.nan, GroundEstimate(), False)
 
 
 @dataclass(frozen=True)
@@ -57,25 +72,10 @@ def finite_imu(imu: ImuBatch) -> ImuBatch:
     return ImuBatch(imu.t_s[good], imu.accel_mps2[good], imu.gyro_radps[good])
 
 
-class SensorFilter(Protocol):
-    """Transforms what the sensors deliver before perception sees it (`TradeFollowEnv.set_sensor_filter`);
-    `trade_gym.faults.SensorFaults` injects faults through it."""
-
-    def filter_camera_pose(self, T_world_cam: Pose) -> Pose:
-        """The pose the camera actually has this frame, given its mounted pose; rendering, ground truth and
-        the pose source all use the result (e.g. a camera knocked sideways)."""
-        ...
-
-    def filter_sensors(self, sensors: SensorFrame, truth: GroundTruth) -> SensorFrame:
-        """The frame perception receives (e.g. blank, dropped: rgb None, stale, corrupt IMU samples);
-        `truth` is read-only context (where the target is)."""
-        ...
-
-
 class Perception(Protocol):
-    """A perception mode. `truth` is consumed only by the oracle (and to initialise trackers)."""
+    """A perception mode: sensors in, one estimate out per frame. `reset` starts an episode from the initial box
+    (x, y, w, h) [px] (the paper's protocol: the ground-truth box, perturbed) and the env's generator."""
 
-    def reset(self, sensors: SensorFrame, init_box: FloatArray, truth: GroundTruth,
-              rng: np.random.Generator) -> PerceptionOutput: ...
+    def reset(self, sensors: SensorFrame, init_box: FloatArray, rng: np.random.Generator) -> PerceptionOutput: ...
 
-    def step(self, sensors: SensorFrame, truth: GroundTruth) -> PerceptionOutput: ...
+    def step(self, sensors: SensorFrame) -> PerceptionOutput: ...

@@ -1,7 +1,9 @@
 """Oracle perception: ground truth passed through a noise model, with no image processing.
 
 The target is measured in the true camera frame and mapped to the world with the pose
-source's estimate, so VIO drift reaches the oracle's estimates the way it reaches TRADE's.
+source's estimate, so VIO drift reaches the oracle's estimates the way it reaches TRADE's. The oracle is the
+one mode that reads ground truth: through the providers the env gives it at construction, never through
+`reset`/`step`.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 from trade.geometry import Pose
 from trade.validation import require
 from trade_gym.ground_truth import GroundTruth
-from trade_gym.perception.base import FloatArray, PerceptionOutput, SensorFrame
+from trade_gym.perception.base import FloatArray, GroundEstimate, PerceptionOutput, SensorFrame
 
 MIN_BOX_SIDE_PX = 1.0
 N_NORMAL_DRAWS = 11
@@ -23,6 +25,7 @@ N_CORRELATED = 10  # box (4), position (3), velocity (3) follow the Gauss-Markov
 # The fitted first-fix delay [s] (agents.train trains with it). OracleConfig's default stays 0: the estimate's NaN
 # depth in info before the first fix defeats gymnasium's check_env (NaN != NaN).
 FITTED_FIRST_FIX_DELAY_S = 2.6
+GROUND_DRAW = 10  # the draw for the ground's depth factor
 
 
 @dataclass(frozen=True)
@@ -52,24 +55,26 @@ class OracleConfig:
 
 
 class OraclePerception:
-    """Ground truth plus noise; needs no rendered image."""
+    """Ground truth plus noise; needs no rendered image. `ground_truth` and `T_world_cam_true` return the current
+    frame's ground truth and true camera pose (the env's, read at each reset and step)."""
 
-    def __init__(self, config: OracleConfig, T_world_cam_true: Callable[[], Pose]) -> None:
+    def __init__(self, config: OracleConfig, ground_truth: Callable[[], GroundTruth],
+                 T_world_cam_true: Callable[[], Pose]) -> None:
         self.config = config
-        self._true_pose = T_world_cam_true  # the camera's true pose now
+        self._truth = ground_truth
+        self._true_pose = T_world_cam_true
         self._rng = np.random.default_rng(0)
         self._last = PerceptionOutput.missing()
         self._noise: np.ndarray | None = None  # (N_CORRELATED,) unit-variance Gauss-Markov state
         self._t_reset_s = 0.0
         self._t_last_s = 0.0
 
-    def reset(self, sensors: SensorFrame, init_box: FloatArray, truth: GroundTruth,
-              rng: np.random.Generator) -> PerceptionOutput:
+    def reset(self, sensors: SensorFrame, init_box: FloatArray, rng: np.random.Generator) -> PerceptionOutput:
         self._rng = rng
         self._last = PerceptionOutput.missing()
         self._noise = None
         self._t_reset_s = self._t_last_s = sensors.t_s
-        return self.step(sensors, truth)
+        return self.step(sensors)
 
     def _unit_noise(self, draws: np.ndarray, dt: float) -> np.ndarray:
         """n_k = rho n_{k-1} + sqrt(1 - rho^2) w_k with rho = exp(-dt / tau), w_k ~ N(0, 1): stationary unit
@@ -82,8 +87,8 @@ class OraclePerception:
             self._noise = rho * self._noise + math.sqrt(1.0 - rho * rho) * draws
         return self._noise
 
-    def step(self, sensors: SensorFrame, truth: GroundTruth) -> PerceptionOutput:
-        cfg = self.config
+    def step(self, sensors: SensorFrame) -> PerceptionOutput:
+        cfg, truth = self.config, self._truth()
         # Draw every noise term each frame so the random stream does not depend on visibility.
         draws = self._rng.standard_normal(N_NORMAL_DRAWS)  # one call: box (4), position (3), velocity (3), ground
         dt_s = sensors.t_s - self._t_last_s
@@ -92,7 +97,7 @@ class OraclePerception:
         box_noise = noise[0:4] * cfg.box_sigma_px
         pos_noise = noise[4:7]
         vel_noise = noise[7:10] * cfg.velocity_sigma_mps
-        ground_noise = float(draws[10])
+        ground_noise = float(draws[GROUND_DRAW])
         dropped = self._rng.random() < cfg.dropout_prob
         if dropped or not all(math.isfinite(v) for v in truth.target_bbox.tolist()):
             self._last = _coast(self._last, dt_s)
@@ -107,7 +112,7 @@ class OraclePerception:
         # Velocity rotates with the estimated orientation error, as a measured vector would.
         R_err = sensors.T_world_cam.R @ T_cam_world_true.R
         velocity = R_err @ truth.target_velocity_mps + vel_noise
-        ground = truth.ground_depth_m * (1.0 + cfg.depth_sigma_frac * ground_noise)
+        ground = GroundEstimate(true_depth_factor=1.0 + cfg.depth_sigma_frac * ground_noise)  # z = z_true (1 + s n)
         if sensors.t_s - self._t_reset_s < cfg.first_fix_delay_s:
             # No 3D fix yet: a box, but no position, velocity or depth (as TRADE before its ROI depths exist).
             position, velocity = np.full(3, np.nan), np.full(3, np.nan)
@@ -119,7 +124,7 @@ class OraclePerception:
             velocity_world_mps=velocity,
             target_depth_m=float(target_cam[2]),
             target_depth_sigma_m=float(depth_sigma),
-            ground_depth_m=float(ground),
+            ground=ground,
             valid=True,
         )
         return self._last
@@ -134,7 +139,7 @@ def _coast(last: PerceptionOutput, dt_s: float) -> PerceptionOutput:
         velocity_world_mps=last.velocity_world_mps,
         target_depth_m=np.nan,
         target_depth_sigma_m=np.nan,
-        ground_depth_m=np.nan,
+        ground=GroundEstimate(),
         valid=False,
     )
 

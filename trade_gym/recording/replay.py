@@ -1,7 +1,7 @@
 """Open-loop replay of the TRADE stack over a recorded sequence: the stack sees the recorded images, poses, times
-and IMU samples, with the frame guards of the env and its own generator seeded as recorded, so a replay of a
-recorded episode gives that episode's estimates exactly; where the sequence has ground truth it is scored with
-trade-bench's metrics.
+and IMU samples (its frame guards are the pipeline's, as in the env) with its own generator seeded as recorded, so
+a replay of a recorded episode gives that episode's estimates exactly; where the sequence has ground truth the
+estimates are scored as the env scores them (`trade_gym.scoring`) and with trade-bench's metrics.
 """
 
 from __future__ import annotations
@@ -15,15 +15,16 @@ import numpy as np
 import numpy.typing as npt
 
 from trade.planes import Plane
-from trade.types import ImuBatch, iou
+from trade.types import ImuBatch
 from trade_gym.config import CAMERA_RATE_HZ, EnvConfig
 from trade_gym.ground_truth import GroundTruth
-from trade_gym.metrics import depth_or_none, episode_metrics, on_decoy
-from trade_gym.perception.base import PerceptionOutput, SensorFrame
+from trade_gym.metrics import episode_metrics
+from trade_gym.perception.base import SensorFrame
 from trade_gym.perception.trade_stack import STACK_SWITCHES, TradePerception, pipeline_config
 from trade_gym.recording.format import (META_FILE, FrameTruth, SequenceError, current_setting_names, encode_box,
                                         encode_real, json_safe)
 from trade_gym.recording.reader import Sequence, SequenceFrame
+from trade_gym.scoring import ScoredEstimate, estimate_scores, ground_depth_along, horizontal_distance_m, score_estimate
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -131,14 +132,16 @@ def replay(sequence: Sequence, settings: ReplaySettings, video: bool = False) ->
     for frame in sequence:
         rgb = sequence.rgb(frame)
         sensors = SensorFrame(frame.t_s, rgb, frame.T_world_cam, frame.imu if frame.imu is not None else ImuBatch.empty())
+        out = (perception.reset_seeded(sensors, init_box, settings.rng_seed) if frame.index == 0
+               else perception.step(sensors))
         truth = _ground_truth(frame.truth)
-        out = (perception.reset_seeded(sensors, init_box, truth, settings.rng_seed) if frame.index == 0
-               else perception.step(sensors, truth))
-        ground = out.ground_depth_m if scored else perception.ground_depth_at(perception.last, sensors, out.bbox)
+        held = score_estimate(out, truth, sensors.T_world_cam, sequence.intrinsics)
+        ground = (held.ground_depth_est_m if scored
+                  else ground_depth_along(out.ground, out.bbox, sensors.T_world_cam, sequence.intrinsics))
         estimates.append(FrameEstimate(frame.index, frame.t_s, out.bbox, bool(out.valid), float(out.target_depth_m),
-                                       float(ground), perception.last.plane))
+                                       float(ground), out.ground.plane))
         if scored and frame.index > 0:
-            infos.append(_info(frame, out, threshold))
+            infos.append(_info(frame, truth, held, threshold))
         if video and rgb is not None:
             from trade_gym.annotate import annotate_frame
 
@@ -166,7 +169,7 @@ def _check_replayable(sequence: Sequence) -> FloatArray:
 
 
 def _ground_truth(truth: FrameTruth | None) -> GroundTruth:
-    """What the stack's adapter reads of the truth (the true box, for the ground depth's ray); NaN without it."""
+    """A frame's recorded truth as the env's, for scoring and drawing (the stack never sees it); NaN without it."""
     nan3 = np.full(3, np.nan)
     if truth is None:
         return GroundTruth(np.full(4, np.nan), np.zeros((0, 4)), math.nan, nan3, nan3, math.nan,
@@ -177,29 +180,18 @@ def _ground_truth(truth: FrameTruth | None) -> GroundTruth:
                        np.full(2, np.nan), truth.ground_depth_m)
 
 
-def _info(frame: SequenceFrame, out: PerceptionOutput, threshold: float) -> dict[str, Any]:
-    """The per-frame record `trade_gym.metrics` scores, as the env's `info` computes it."""
-    truth = frame.truth
-    est_box = out.bbox.tolist()
-    est_iou = iou(truth.target_bbox_xywh_px.tolist(), est_box)
-    drone, target = truth.drone_position_world_m, truth.target_position_world_m
+def _info(frame: SequenceFrame, truth: GroundTruth, held: ScoredEstimate, threshold: float) -> dict[str, Any]:
+    """The per-frame record `trade_gym.metrics` scores, as the env's `info` computes it (`truth`: the frame's
+    recorded truth as the env's)."""
+    recorded = frame.truth
+    drone, target = recorded.drone_position_world_m, recorded.target_position_world_m
     return {
-        "t_s": truth.t_s if math.isfinite(truth.t_s) else frame.t_s,  # the true time, as the env's info
-        "gt_bbox": truth.target_bbox_xywh_px,
-        "est_bbox": out.bbox,
-        "iou": est_iou,
-        "target_visible": truth.target_visible_fraction >= threshold,
-        "target_visible_fraction": truth.target_visible_fraction,
-        "on_decoy": on_decoy(est_box, est_iou, truth.decoy_bboxes_in_view()),
-        "target_depth_gt": depth_or_none(truth.target_depth_m),
-        "target_depth_est": depth_or_none(out.target_depth_m),
-        "ground_depth_gt": depth_or_none(truth.ground_depth_m),
-        "ground_depth_est": depth_or_none(out.ground_depth_m),
-        "est_valid": out.valid,
-        "crashed": truth.crashed,
+        "t_s": recorded.t_s if math.isfinite(recorded.t_s) else frame.t_s,  # the true time, as the env's info
+        **estimate_scores(truth, held, threshold, recorded.decoy_bboxes_in_view()),
+        "crashed": recorded.crashed,
         "drone_position_m": drone,
         "target_position_m": target,
-        "horizontal_distance_m": math.hypot(target[0] - drone[0], target[1] - drone[1]),
+        "horizontal_distance_m": horizontal_distance_m(drone, target),
     }
 
 
