@@ -145,6 +145,11 @@ class GroundFilter:
         return agrees
 
     @property
+    def mask(self) -> GroundMask | None:
+        """The latest ground mask (None before the first one)."""
+        return self._mask
+
+    @property
     def model_rejected(self) -> bool:
         """The model's latest map was rejected: every track counts as ground until a valid map."""
         return self._model_rejected

@@ -170,6 +170,12 @@ class TradePipeline:
         """The correlation filter (its committed box)."""
         return self.tracking.dcf
 
+    @property
+    def ground_mask(self) -> npt.NDArray[np.bool_] | None:
+        """(H, W) the latest ground mask, True on the ground (None without the mask or before its first run)."""
+        mask = self.ground.mask if self.ground is not None else None
+        return None if mask is None else mask.mask
+
     def initialise(self, image_rgb: npt.NDArray[np.uint8], box: BBox, T_world_cam: Pose, t_s: float) -> Estimate:
         """Start tracking `box` (x, y, w, h) [px] in `image_rgb` (H, W, 3) uint8 at time t_s."""
         self._check_image(image_rgb)

@@ -77,3 +77,19 @@ def test_record_video_writes_an_mp4_of_every_frame_with_panels_of_at_least_512_p
         pytest.fail("OpenCV wrote no mp4 (the project's opencv-python-headless has an mp4 encoder)")
     assert len(frames) == STEPS + 1  # the reset frame and every step
     assert frames[0].shape[1] == 2 * VIDEO_PANEL_PX and frames[0].shape[0] > VIDEO_PANEL_PX
+
+
+def test_overlay_tints_the_ground_mask_and_leaves_the_rest():
+    from types import SimpleNamespace
+
+    from trade.geometry import CameraIntrinsics, Pose
+    from trade_gym.perception.trade_stack import TradeOverlay
+
+    image = np.full((16, 16, 3), 100, np.uint8)
+    mask = np.zeros((16, 16), bool)
+    mask[8:] = True
+    est = SimpleNamespace(roi=None, trajectory_preview_world_m=np.zeros((0, 3)))
+    K = CameraIntrinsics(10.0, 10.0, 7.5, 7.5, 16, 16)
+    TradeOverlay(est, K, Pose(np.eye(3), np.zeros(3)), mask).draw(image)
+    assert (image[:8] == 100).all()
+    assert (image[8:, :, 0] < 100).all() and (image[8:, :, 1:] > 100).all()  # towards cyan

@@ -100,8 +100,8 @@ class Dashboard:
         self._remember(info, np.asarray(estimate_world_m, float))
         side, t_s = self.panel_px, info["t_s"]
         left = cv2.resize(onboard, (side, side), interpolation=cv2.INTER_NEAREST)
-        header = np.hstack([_legend(side, ["onboard: green truth box, red estimate",
-                                           "magenta predicted path, dots: ROI depth"]),
+        header = np.hstack([_legend(side, ["onboard: green truth box, red estimate, cyan ground mask",
+                                           "magenta predicted path, dots: ROI depth (blue near)"]),
                             _legend(side, [f"top view, {self.box.side_m:.0f} m wide, north up, t = {t_s:.1f} s",
                                            "green target, blue drone, red estimate, orange decoys"])])
         panels = np.hstack([left, self._top_view(t_s)])

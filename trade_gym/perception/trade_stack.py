@@ -21,6 +21,8 @@ from trade_gym.perception.base import FloatArray, GroundEstimate, PerceptionOutp
 
 TRAJECTORY_COLOUR_RGB = (255, 0, 255)  # magenta, as in the paper's figures
 INLIER_COLOUR_RGB = (255, 255, 0)
+GROUND_TINT_RGB = np.array((0.0, 255.0, 255.0), np.float32)  # cyan over the ground mask
+GROUND_TINT_WEIGHT = 0.3
 FEATURE_DEPTH_RANGE_M = (5.0, 60.0)  # colour map range for ROI feature depths
 POINT_RADIUS_PX = 1
 INLIER_RADIUS_PX = 3
@@ -89,7 +91,7 @@ class TradePerception:
     def overlay(self) -> TradeOverlay | None:
         if self.last is None or self._T_world_cam is None:
             return None
-        return TradeOverlay(self.last, self.intrinsics, self._T_world_cam)
+        return TradeOverlay(self.last, self.intrinsics, self._T_world_cam, self.pipeline.ground_mask)
 
 
 def _output(est: Estimate) -> PerceptionOutput:
@@ -107,13 +109,17 @@ def _output(est: Estimate) -> PerceptionOutput:
 
 class TradeOverlay:
     """Draws what the paper's figures show: predicted trajectory (magenta), ROI features coloured
-    by depth, plane inliers circled."""
+    by depth, plane inliers circled; and the latest ground mask (cyan tint) when the mask is on."""
 
-    def __init__(self, est: Estimate, intrinsics: CameraIntrinsics, T_world_cam) -> None:
-        self.est, self.K, self.T_world_cam = est, intrinsics, T_world_cam
+    def __init__(self, est: Estimate, intrinsics: CameraIntrinsics, T_world_cam,
+                 ground_mask: npt.NDArray[np.bool_] | None = None) -> None:
+        self.est, self.K, self.T_world_cam, self.ground_mask = est, intrinsics, T_world_cam, ground_mask
 
     def draw(self, image: npt.NDArray[np.uint8]) -> None:
         est = self.est
+        if self.ground_mask is not None and self.ground_mask.shape == image.shape[:2]:
+            tinted = image[self.ground_mask].astype(np.float32)
+            image[self.ground_mask] = (tinted + GROUND_TINT_WEIGHT * (GROUND_TINT_RGB - tinted)).astype(np.uint8)
         if est.roi is not None and len(est.roi.pixels):
             self._draw_features(image)
         if len(est.trajectory_preview_world_m):
