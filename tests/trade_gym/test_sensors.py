@@ -304,3 +304,19 @@ def test_observed_drone_velocity_comes_from_the_pose_source():
     np.testing.assert_allclose(exact, gt, atol=1e-6)
     error = np.abs(vio - gt)
     assert error.max() > 1e-3 and error.max() < 6 * VioConfig().velocity_error_sigma_mps
+
+
+def test_pose_source_vio_velocity_error_leaves_the_pose_drift_as_it_was():
+    """The velocity error draws from a child stream: the pose drift is the same with or without velocity calls."""
+    T = Pose(np.eye(3), np.zeros(3))
+
+    def drift(with_velocity: bool) -> list[np.ndarray]:
+        source = VioPoseSource(VioConfig(), np.random.default_rng(4))
+        out = []
+        for k in range(1, 50):
+            out.append(source.estimate(T, 0.1 * k).t)
+            if with_velocity:
+                source.velocity(np.ones(3), k * FRAME_S)
+        return out
+
+    np.testing.assert_array_equal(drift(True), drift(False))

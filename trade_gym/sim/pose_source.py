@@ -89,6 +89,9 @@ class VioPoseSource:
         self._last_distance_m = 0.0
         self._velocity_error_mps = np.zeros(3)
         self._last_velocity_t_s: float | None = None
+        # A child stream (spawning leaves `rng`'s own draws as they were), so the velocity error does not move
+        # the pose drift or any other draw of the env's generator.
+        self._velocity_rng = rng.spawn(1)[0]
 
     @property
     def position_error_m(self) -> np.ndarray:
@@ -128,7 +131,7 @@ class VioPoseSource:
         if last is not None and t_s > last:
             cfg = self.config
             a = math.exp(-(t_s - last) / cfg.velocity_error_correlation_s)
-            noise = cfg.velocity_error_sigma_mps * math.sqrt(1.0 - a * a) * self._rng.standard_normal(3)
+            noise = cfg.velocity_error_sigma_mps * math.sqrt(1.0 - a * a) * self._velocity_rng.standard_normal(3)
             self._velocity_error_mps = a * self._velocity_error_mps + noise
         self._last_velocity_t_s = float(t_s)
         return rotation_z(self._yaw_error_rad) @ np.asarray(velocity_world_true_mps, float) + self._velocity_error_mps
