@@ -36,8 +36,7 @@ from trade_gym.sim.quadrotor import Quadrotor
 from trade_gym.sim.world import World, build_world
 
 GRAVITY_MPS2 = 9.81
-# Rays for the ground-depth truth reach this far beyond the drone's height [m].
-GROUND_RAY_RANGE_M = 1000.0
+GROUND_RAY_RANGE_M = 1000.0  # rays for the ground-depth truth reach this far beyond the drone's height [m]
 
 
 class TradeFollowEnv(gym.Env):
@@ -63,7 +62,7 @@ class TradeFollowEnv(gym.Env):
     |---|---|---|---|
     | target_pos_rel_m | 3 | +-1000 m | estimated target minus drone position, heading frame |
     | target_vel_mps | 3 | +-100 m/s | estimated target velocity, heading frame |
-    | drone_vel_mps | 3 | +-100 m/s | drone velocity, heading frame |
+    | drone_vel_mps | 3 | +-100 m/s | drone velocity from the pose source (drifts with `vio`), heading frame |
     | bbox_norm | 4 | [0, 1] | estimated box centre and size over the image side (0 if none) |
     | target_depth_m | 1 | [0, 1000] m | estimated camera-frame depth of the target (0 if none) |
     | track_valid | 1 | {0, 1} | 1 when the estimate held brought a fresh box at its frame |
@@ -103,8 +102,7 @@ class TradeFollowEnv(gym.Env):
     `visible` +1 while the target is in view; `distance` -min(d / h, 1), d the horizontal distance to the
     target, h the scene's follow height; `height` -0.5 min(|height above the target's ground - h| / h, 1);
     `effort` -0.05 mean(action^2); `crash` -150 on a crash (more than flying on until the lost-target timeout
-    can lose, so a crash never pays). A frame of good following earns about 0.9; hovering a follow height
-    off the target about 0.
+    can lose, so a crash never pays).
 
     ## Starting State
     The drone hovers at the scene's follow height with the target in view; tracking starts from
@@ -133,6 +131,8 @@ class TradeFollowEnv(gym.Env):
     - v0, issue 18: `quadrotor=` (QuadrotorConfig: airframe, setpoint limits = action scale, gains) and `vio=`
       (VioConfig: the VIO pose drift); the defaults are as before. Perception sees sensors only, the env scores
       it; the frame guards are `trade`'s. Same values.
+    - v0, issue 17: `drone_vel_mps` comes from the pose source (with `vio`: rotated by the yaw drift, plus a
+      bounded velocity error, `VioConfig`), no longer from the simulator's true state.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -396,7 +396,8 @@ class TradeFollowEnv(gym.Env):
         )
         self._last_truth = truth
         T_est = self.pose_source.estimate(T_world_cam, self._distance_flown_m)
-        sensors = SensorFrame(self._t_s, None if frame is None else frame.rgb, T_est, self.imu.read())
+        velocity = self.pose_source.velocity(self._state.velocity_mps, self._t_s)
+        sensors = SensorFrame(self._t_s, None if frame is None else frame.rgb, T_est, self.imu.read(), velocity)
         if self._sensor_filter is not None:
             sensors = self._sensor_filter.filter_sensors(sensors, truth)
         return sensors, truth
@@ -436,7 +437,7 @@ class TradeFollowEnv(gym.Env):
             estimate,
             drone_position_est_m=T_world_body_est.t,
             drone_yaw_est_rad=yaw_est,
-            drone_velocity_world_mps=self._state.velocity_mps,
+            drone_velocity_world_mps=sensors.velocity_world_mps,
             imu=sensors.imu,
             time_lost_s=self._time_lost_s,
             estimate_age_s=self._estimate_age_s,

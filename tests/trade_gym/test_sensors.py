@@ -246,3 +246,77 @@ def test_pose_source_vio_same_seed_same_drift_no_motion_no_drift():
 def test_make_pose_source_unknown_name_raises_listing_valid_names():
     with pytest.raises(ValueError, match=r"'slam'.*gt.*vio"):
         make_pose_source("slam", np.random.default_rng(0))
+
+
+FRAME_S = 1.0 / 30.0
+
+
+def test_pose_source_gt_velocity_is_the_true_velocity():
+    source = make_pose_source("gt", np.random.default_rng(0))
+    v = np.array([1.0, -2.0, 0.5])
+    np.testing.assert_array_equal(source.velocity(v, 0.0), v)
+
+
+def test_pose_source_vio_velocity_error_starts_at_zero_and_stays_bounded_near_its_sigma():
+    config = VioConfig(velocity_error_sigma_mps=0.05, velocity_error_correlation_s=2.0)
+    source = VioPoseSource(config, np.random.default_rng(1))
+    v = np.array([3.0, 0.0, 0.0])
+    np.testing.assert_array_equal(source.velocity(v, 0.0), v)  # no time has passed, no drift flown
+    errors = np.array([source.velocity(v, k * FRAME_S) - v for k in range(1, 30_001)])
+    steady = errors[3000:]  # after 50 correlation times
+    assert np.all(np.abs(steady.std(axis=0) / config.velocity_error_sigma_mps - 1.0) < 0.2)
+    assert np.abs(errors).max() < 6 * config.velocity_error_sigma_mps
+
+
+def test_pose_source_vio_velocity_turns_with_the_yaw_drift_like_the_pose():
+    source = VioPoseSource(VioConfig(position_drift_sigma_m_per_sqrt_m=0.0, velocity_error_sigma_mps=0.0),
+                           np.random.default_rng(2))
+    T = Pose(np.eye(3), np.zeros(3))
+    drifted = source.estimate(T, 400.0)  # 400 m flown: a yaw drift of ~2.3 deg
+    v = np.array([2.0, 1.0, -0.5])
+    assert source.yaw_error_rad != 0.0
+    np.testing.assert_allclose(source.velocity(v, FRAME_S), drifted.R @ v, atol=1e-12)
+
+
+def test_pose_source_vio_velocity_time_going_back_raises_naming_it():
+    source = VioPoseSource(VioConfig(), np.random.default_rng(3))
+    source.velocity(np.zeros(3), 1.0)
+    with pytest.raises(ValueError, match="t_s"):
+        source.velocity(np.zeros(3), 0.5)
+
+
+def test_observed_drone_velocity_comes_from_the_pose_source():
+    """Same seed, zero actions (the pose source does not touch the physics): with gt the observed velocity is
+    the true one; with vio it differs by the VIO's bounded velocity error, and by nothing with a zero drift."""
+    from trade_gym.env import TradeFollowEnv
+
+    def velocities(**kwargs) -> np.ndarray:
+        env = TradeFollowEnv(scene="desert", perception="oracle", **kwargs)
+        try:
+            env.reset(seed=0)
+            return np.array([env.step(np.zeros(4, np.float32))[0]["drone_vel_mps"] for _ in range(60)])
+        finally:
+            env.close()
+
+    gt, vio = velocities(pose_source="gt"), velocities(pose_source="vio")
+    exact = velocities(pose_source="vio", vio={"position_drift_sigma_m_per_sqrt_m": 0.0,
+                                                "yaw_drift_sigma_rad_per_sqrt_m": 0.0, "velocity_error_sigma_mps": 0.0})
+    np.testing.assert_allclose(exact, gt, atol=1e-6)
+    error = np.abs(vio - gt)
+    assert error.max() > 1e-3 and error.max() < 6 * VioConfig().velocity_error_sigma_mps
+
+
+def test_pose_source_vio_velocity_error_leaves_the_pose_drift_as_it_was():
+    """The velocity error draws from a child stream: the pose drift is the same with or without velocity calls."""
+    T = Pose(np.eye(3), np.zeros(3))
+
+    def drift(with_velocity: bool) -> list[np.ndarray]:
+        source = VioPoseSource(VioConfig(), np.random.default_rng(4))
+        out = []
+        for k in range(1, 50):
+            out.append(source.estimate(T, 0.1 * k).t)
+            if with_velocity:
+                source.velocity(np.ones(3), k * FRAME_S)
+        return out
+
+    np.testing.assert_array_equal(drift(True), drift(False))

@@ -60,6 +60,9 @@ class SensorFrame:
     rgb: npt.NDArray[np.uint8] | None
     T_world_cam: Pose  # from the pose source (exact or drifting)
     imu: ImuBatch
+    # (3,) the drone's velocity from the pose source, in its (drifting) world frame [m/s]; None where unknown
+    # (a recorded sequence without it)
+    velocity_world_mps: FloatArray | None = None
 
 
 def finite_imu(imu: ImuBatch) -> ImuBatch:

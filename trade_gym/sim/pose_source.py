@@ -11,7 +11,7 @@ from typing import Protocol
 
 import numpy as np
 
-from trade.geometry import Pose, rotation_z
+from trade.geometry import FloatArray, Pose, rotation_z
 from trade.validation import is_finite_number, require
 
 POSE_SOURCE_NAMES = ("gt", "vio")
@@ -30,9 +30,17 @@ class VioConfig:
 
     position_drift_sigma_m_per_sqrt_m: float = 0.1
     yaw_drift_sigma_rad_per_sqrt_m: float = 0.002
+    # Velocity is observable to a VIO (visual flow against inertial), so its error stays bounded: a first-order
+    # Gauss-Markov error per axis of this steady-state sigma and correlation time, zero at reset (the filter
+    # starts at rest), in the drifted frame (rotated by the yaw drift like the pose).
+    velocity_error_sigma_mps: float = 0.05
+    velocity_error_correlation_s: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ("position_drift_sigma_m_per_sqrt_m", "yaw_drift_sigma_rad_per_sqrt_m"):
+        require(is_finite_number(self.velocity_error_correlation_s) and self.velocity_error_correlation_s > 0,
+                "VioConfig.velocity_error_correlation_s", self.velocity_error_correlation_s, "a finite number > 0")
+        for name in ("position_drift_sigma_m_per_sqrt_m", "yaw_drift_sigma_rad_per_sqrt_m",
+                     "velocity_error_sigma_mps"):
             value = getattr(self, name)
             require(is_finite_number(value) and value >= 0, f"VioConfig.{name}", value, "a finite number >= 0")
 
@@ -44,9 +52,11 @@ class PoseSource(Protocol):
 
     def estimate(self, T_world_cam_true: Pose, distance_flown_m: float) -> Pose: ...
 
+    def velocity(self, velocity_world_true_mps: FloatArray, t_s: float) -> FloatArray: ...
+
 
 class GroundTruthPoseSource:
-    """Returns the true camera pose unchanged."""
+    """Returns the true camera pose and velocity unchanged."""
 
     def reset(self, rng: np.random.Generator) -> None:
         """Nothing to reset; accepts the generator for a common interface."""
@@ -54,13 +64,18 @@ class GroundTruthPoseSource:
     def estimate(self, T_world_cam_true: Pose, distance_flown_m: float) -> Pose:
         return T_world_cam_true
 
+    def velocity(self, velocity_world_true_mps: FloatArray, t_s: float) -> FloatArray:
+        return velocity_world_true_mps
+
 
 class VioPoseSource:
-    """Drifting pose: p_est = p + dp, R_est = Rz(dpsi) R, with dp, dpsi random walks in distance flown.
+    """Drifting pose: p_est = p + dp, R_est = Rz(dpsi) R, with dp, dpsi random walks in distance flown;
+    velocity v_est = Rz(dpsi) v + e, e a Gauss-Markov error in time.
 
     `distance_flown_m` is the odometer since reset (monotone); each call advances the walks by the
     distance dd flown since the previous call: dp += sigma_p sqrt(dd) N(0, I3),
-    dpsi += sigma_psi sqrt(dd) N(0, 1).
+    dpsi += sigma_psi sqrt(dd) N(0, 1). Each `velocity` call at a later time t advances e over
+    dt: e = a e + sigma_v sqrt(1 - a^2) N(0, I3), a = exp(-dt / tau_v).
     """
 
     def __init__(self, config: VioConfig, rng: np.random.Generator) -> None:
@@ -72,6 +87,11 @@ class VioPoseSource:
         self._position_error_m = np.zeros(3)
         self._yaw_error_rad = 0.0
         self._last_distance_m = 0.0
+        self._velocity_error_mps = np.zeros(3)
+        self._last_velocity_t_s: float | None = None
+        # A child stream (spawning leaves `rng`'s own draws as they were), so the velocity error does not move
+        # the pose drift or any other draw of the env's generator.
+        self._velocity_rng = rng.spawn(1)[0]
 
     @property
     def position_error_m(self) -> np.ndarray:
@@ -101,6 +121,20 @@ class VioPoseSource:
             self._yaw_error_rad += cfg.yaw_drift_sigma_rad_per_sqrt_m * root * float(draws[3])
         T = T_world_cam_true
         return Pose(rotation_z(self._yaw_error_rad) @ T.R, T.t + self._position_error_m)
+
+
+    def velocity(self, velocity_world_true_mps: FloatArray, t_s: float) -> FloatArray:
+        """(3,) velocity in the drifted frame [m/s] at time `t_s` (non-decreasing across calls) [s]."""
+        last = self._last_velocity_t_s
+        if not math.isfinite(t_s) or (last is not None and t_s < last):
+            raise ValueError(f"t_s must be finite and non-decreasing, got {t_s!r} after {last!r}")
+        if last is not None and t_s > last:
+            cfg = self.config
+            a = math.exp(-(t_s - last) / cfg.velocity_error_correlation_s)
+            noise = cfg.velocity_error_sigma_mps * math.sqrt(1.0 - a * a) * self._velocity_rng.standard_normal(3)
+            self._velocity_error_mps = a * self._velocity_error_mps + noise
+        self._last_velocity_t_s = float(t_s)
+        return rotation_z(self._yaw_error_rad) @ np.asarray(velocity_world_true_mps, float) + self._velocity_error_mps
 
 
 def make_pose_source(name: str, rng: np.random.Generator, vio_config: VioConfig | None = None) -> PoseSource:
