@@ -45,6 +45,7 @@ CONTRAST_JITTER = 0.1  # multiplicative about 0.5
 NOISE_STD_U8 = 3.0  # Gaussian pixel noise [grey levels]
 MAX_ABS_ONNX_DIFF = 1e-4
 TIMING_CALLS = 200
+ONNX_CHECK_FRAMES = 8  # held-out frames run through both torch and ONNX after export
 DATA_DIR = Path(__file__).resolve().parents[1] / "build" / "depth_dataset"
 
 
@@ -238,10 +239,21 @@ def time_runtime(model: SingleImageDepth, rgb: np.ndarray) -> float:
     return 1000.0 * float(np.median(times))
 
 
+_CARD_LIMITS = """## Limits
+Trained only on trade-gym renders (TinyRenderer, three procedural scenes, level body with a pitched camera);
+relative inverse depth only, never metric; expect it to fail on real imagery or other renderers.
+"""
+
+
 def write_card(path: Path, info: dict) -> None:
-    m = info["metrics"]
-    scene_rows = "\n".join(f"| {k} | {v[2]} | {v[0]:.4f} | {v[1]:.4f} |" for k, v in m.items())
-    path.write_text(f"""# depth_small.onnx: single-image relative inverse depth (model card)
+    """Write the model card (markdown) at `path` from the run summary `info` built in `main`."""
+    sections = (_card_model(info), _card_data(info), _card_training(info), _card_metrics(info), _CARD_LIMITS)
+    path.write_text("\n".join(sections))
+
+
+def _card_model(info: dict) -> str:
+    """Card title and the model: file, hash, input/output, architecture."""
+    return f"""# depth_small.onnx: single-image relative inverse depth (model card)
 
 Small U-Net-ish encoder-decoder standing in for MiDaS (paper, "Single-Image Depth"): RGB in, relative
 inverse depth out (an unknown affine map of 1 / z; align it with `trade.depth_alignment`). Trained here from
@@ -254,8 +266,12 @@ scratch on simulator renders (no pretrained weights); it knows only trade-gym's 
 - Architecture: encoder {ENCODER_CHANNELS} (3x3 conv-BN-ReLU, stride 2; stages after the first add a second conv), decoder
   {DECODER_CHANNELS} (bilinear x2, skip concat, conv-BN-ReLU), 3x3 head at 32 px, bilinear x4, softplus;
   {info['params']} parameters. ONNX opset {OPSET}, dynamic batch.
+"""
 
-## Data (scripts/make_depth_dataset.py)
+
+def _card_data(info: dict) -> str:
+    """Card section: how the training and held-out frames were rendered."""
+    return f"""## Data (scripts/make_depth_dataset.py)
 `python scripts/make_depth_dataset.py` (defaults: 300 train worlds, 25 held-out, 8 views each).
 World k of a split: `build_world(cid, ("desert", "city", "mountain")[k % 3], default_rng(seed_base + k))`,
 one pybullet DIRECT client reset before each world; 8 views per world from the same generator: vehicles posed at
@@ -264,17 +280,26 @@ U(12, 40) m above the surface (roofs included); yaw U(-pi, pi); mount pitch U(60
 110 deg vertical FOV, TinyRenderer. Train: seeds {info['train_seeds']}, {info['train_frames']} frames.
 Held-out: seeds {info['heldout_seeds']}, {info['heldout_frames']} frames. The benchmark evaluates seeds 0..99
 (disjoint). Render time (world builds + renders, one core): {info['render_s']}.
+"""
 
-## Training (scripts/train_depth.py)
+
+def _card_training(info: dict) -> str:
+    """Card section: command, loss, augmentation, optimiser, machine and export check."""
+    return f"""## Training (scripts/train_depth.py)
 `{info['command']}`
 Loss: MiDaS scale-and-shift-invariant loss on inverse depth (per-image least-squares alignment, L1 of the
 residual relative to the image's mean inverse depth) + {GRAD_WEIGHT} x gradient matching at {GRAD_SCALES} scales;
 sky pixels (depth >= 0.99 far) masked. Augmentation: horizontal flip, brightness/contrast jitter, pixel noise.
 Adam, one-cycle LR (max {info['lr']}), batch {info['batch']}, {info['epochs']} epochs, seed {SEED},
 torch {torch.__version__} with {info['threads']} thread(s) on {info['cpu']}: {info['train_s']:.0f} s wall time.
-Max |ONNX - torch| on 8 held-out frames: {info['onnx_diff']:.2e}.
+Max |ONNX - torch| on {ONNX_CHECK_FRAMES} held-out frames: {info['onnx_diff']:.2e}.
+"""
 
-## Held-out metrics
+
+def _card_metrics(info: dict) -> str:
+    """Card section: held-out AbsRel and delta1 per scene group, and the inference time."""
+    rows = "\n".join(f"| {k} | {v[2]} | {v[0]:.4f} | {v[1]:.4f} |" for k, v in info["metrics"].items())
+    return f"""## Held-out metrics
 Per frame: least-squares scale and shift of the prediction to 1 / depth on valid pixels, aligned inverse depth
 capped below at 1 / (frame's max depth), converted to depth; AbsRel = mean |d' - d| / d, delta1 = fraction
 with max(d'/d, d/d') < 1.25 (`trade.single_image_depth.depth_metrics_after_alignment`); mean over frames,
@@ -282,14 +307,10 @@ run through the exported ONNX model with onnxruntime.
 
 | scenes | frames | AbsRel | delta1 |
 | --- | --- | --- | --- |
-{scene_rows}
+{rows}
 
 Inference (`SingleImageDepth.predict`, 128 x 128 input, onnxruntime 1 thread): median {info['ms']:.2f} ms per call.
-
-## Limits
-Trained only on trade-gym renders (TinyRenderer, three procedural scenes, level body with a pitched camera);
-relative inverse depth only, never metric; expect it to fail on real imagery or other renderers.
-""")
+"""
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -309,7 +330,7 @@ def main(argv: list[str] | None = None) -> None:
     params = sum(p.numel() for p in net.parameters())
     print(f"{len(train_data['rgb'])} train / {len(heldout['rgb'])} held-out frames, {params} parameters", flush=True)
     epochs, train_s = train(net, train_data, heldout, args)
-    diff = export(net, args.out, heldout["rgb"][:8])
+    diff = export(net, args.out, heldout["rgb"][:ONNX_CHECK_FRAMES])
     print(f"max |onnx - torch| = {diff:.2e} (bound {MAX_ABS_ONNX_DIFF:g})", flush=True)
     if not diff <= MAX_ABS_ONNX_DIFF:
         raise SystemExit(f"ONNX export differs from torch by {diff:.2e} > {MAX_ABS_ONNX_DIFF:g}")

@@ -347,6 +347,39 @@ def _box_points(crop: _Crop, box: BBox, shape: tuple[int, int]) -> FloatArray:
     return crop.q[:, r0:r1, c0:c1][:, crop.valid[r0:r1, c0:c1]].T + crop.origin
 
 
+def _coarse_height(seed_heights: FloatArray, box_pts: FloatArray, config: GroundSegmentationConfig
+                   ) -> tuple[float, float]:
+    """(ground level, coarse object height) [m]: a low percentile of the seeding tiles' mean world heights, and
+    the mean height of the box points (M, 3) world above it, clamped to the configured object heights."""
+    ground = float(np.percentile(seed_heights, config.ground_percentile))
+    coarse = config.min_object_height_m
+    if box_pts.shape[0] > 0:
+        coarse = float(np.mean(box_pts[:, 2])) - ground
+    return ground, float(np.clip(coarse, config.min_object_height_m, config.max_object_height_m))
+
+
+def _ground_tiles(tiles: _Tiles, contained: BoolArray, config: GroundSegmentationConfig
+                  ) -> tuple[BoolArray, FloatArray]:
+    """(member (R, C): fitted tiles outside the box, level within max_ground_tilt_deg and planar by (iii);
+    score (T,): MSE / z^2, the seeding order, lowest first)."""
+    grid = contained.shape
+    depth2 = np.where(tiles.ok, tiles.depth, 1.0) ** 2  # unfitted tiles (never members): any depth > 0
+    ref = config.mse_reference_depth_m
+    paper = config.tile_mse_threshold_m2 * (1.0 if ref is None else depth2 / ref**2)
+    planar = tiles.mse < np.maximum(paper, config.mse_noise_factor * tiles.noise_rel2 * depth2)
+    level = tiles.normal[:, 2].reshape(grid) >= math.cos(math.radians(config.max_ground_tilt_deg))
+    return tiles.ok.reshape(grid) & ~contained & level & planar.reshape(grid), tiles.mse / depth2
+
+
+def _mask_plane(crop: _Crop, tiles: _Tiles, crop_mask: BoolArray) -> Plane | None:
+    """World plane fitted to the valid points of `crop_mask` (h, w); None below PLANE_POINTS points."""
+    sums = tiles.moments @ crop_mask.ravel().astype(np.float64)
+    if sums[0] < PLANE_POINTS:
+        return None
+    centroid, normal, mse = _plane_from_sums(sums)
+    return Plane(normal, -float(normal @ (centroid + crop.origin)), mse, int(sums[0]))
+
+
 def _failed(shape: tuple[int, int], grid: tuple[int, int], t_start: float, coarse_m: float = math.nan,
             ground_m: float = math.nan) -> GroundMask:
     total = time.perf_counter() - t_start
@@ -377,24 +410,12 @@ def segment_ground(
     grid = (tiles.row_edges.size - 1, tiles.col_edges.size - 1)
     contained, touching = _box_tiles(tiles, crop, box, shape)
     height = (tiles.centroid[:, 2] + crop.origin[2]).reshape(grid)
-    ok = tiles.ok.reshape(grid)
-    seeding = _dilate(touching, eight=True) & ~contained & ok
+    seeding = _dilate(touching, eight=True) & ~contained & tiles.ok.reshape(grid)
     box_pts = _box_points(crop, box, shape)
     if not np.any(seeding):
         return _failed(shape, grid, t_start)
-    # coarse height: mean box height minus the ground level (a low percentile of seeding-tile heights)
-    ground = float(np.percentile(height[seeding], config.ground_percentile))
-    coarse = config.min_object_height_m
-    if box_pts.shape[0] > 0:
-        coarse = float(np.mean(box_pts[:, 2])) - ground
-    coarse = float(np.clip(coarse, config.min_object_height_m, config.max_object_height_m))
-    depth2 = np.where(tiles.ok, tiles.depth, 1.0) ** 2
-    score = tiles.mse / depth2  # seeds: lowest MSE / z^2 first
-    ref = config.mse_reference_depth_m
-    paper = config.tile_mse_threshold_m2 * (1.0 if ref is None else depth2 / ref**2)
-    planar = tiles.mse < np.maximum(paper, config.mse_noise_factor * tiles.noise_rel2 * depth2)
-    level = tiles.normal[:, 2].reshape(grid) >= math.cos(math.radians(config.max_ground_tilt_deg))
-    member = ok & ~contained & level & planar.reshape(grid)
+    ground, coarse = _coarse_height(height[seeding], box_pts, config)
+    member, score = _ground_tiles(tiles, contained, config)
     seeds_ok = seeding & member & (height <= ground + coarse)
     t_fit = time.perf_counter()
     region, n_seeds = _seed_and_grow(tiles, member, seeds_ok, score, config)
@@ -405,11 +426,7 @@ def segment_ground(
     mask = np.zeros(shape, dtype=bool)
     h, w = crop_mask.shape
     mask[crop.r0:crop.r0 + h, crop.c0:crop.c0 + w] = crop_mask
-    plane = None
-    mask_sums = tiles.moments @ crop_mask.ravel().astype(np.float64)
-    if mask_sums[0] >= PLANE_POINTS:
-        centroid, normal, mse = _plane_from_sums(mask_sums)
-        plane = Plane(normal, -float(normal @ (centroid + crop.origin)), mse, int(mask_sums[0]))
+    plane = _mask_plane(crop, tiles, crop_mask)
     height_above = coarse
     if plane is not None and box_pts.shape[0] > 0:
         height_above = float(np.mean(plane.signed_distance(box_pts)))

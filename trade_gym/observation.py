@@ -29,6 +29,7 @@ OBSERVATION_SIZES = (("target_pos_rel_m", 3), ("target_vel_mps", 3), ("drone_vel
                      ("estimate_age_s", 1))
 _ends = np.cumsum([n for _, n in OBSERVATION_SIZES]).tolist()
 _LAYOUT = tuple((key, end - n, end) for (key, n), end in zip(OBSERVATION_SIZES, _ends))
+_IMU_ENTRIES = dict(OBSERVATION_SIZES)["imu"]  # specific force (3) then rate (3)
 
 
 def observation_space() -> spaces.Dict:
@@ -72,43 +73,50 @@ def build_observation(
     Written with scalar math: this runs every env step and numpy's per-call overhead on
     3-vectors would dominate it."""
     c, s = math.cos(drone_yaw_est_rad), math.sin(drone_yaw_est_rad)
-
-    def heading(v: FloatArray, bound: float) -> list[float]:
-        # R_heading_world v = Rz(yaw)^T v, clipped to the space's bounds; zeros when unknown
-        x, y, z = v.tolist()
-        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-            return [0.0, 0.0, 0.0]
-        return [_clip(c * x + s * y, bound), _clip(-s * x + c * y, bound), _clip(z, bound)]
-
     rel = estimate.position_world_m - drone_position_est_m
-    x, y, w, h = estimate.bbox.tolist()
-    if all(math.isfinite(v) for v in (x, y, w, h)):
-        bbox_norm = [min(max(v / image_size_px, 0.0), 1.0) for v in (x + w / 2.0, y + h / 2.0, w, h)]
-    else:
-        bbox_norm = [0.0, 0.0, 0.0, 0.0]
     depth = estimate.target_depth_m if math.isfinite(estimate.target_depth_m) else 0.0
-    imu_mean = _imu_mean(imu)
-    if imu_mean is not None:
-        mean = imu_mean.tolist()
-        imu_values = [_clip(v, IMU_ACCEL_BOUND_MPS2) for v in mean[:3]]
-        imu_values += [_clip(v, IMU_GYRO_BOUND_RADPS) for v in mean[3:]]
-    else:
-        imu_values = [0.0] * 6
     values = [
-        *heading(rel, POSITION_BOUND_M),
-        *heading(estimate.velocity_world_mps, VELOCITY_BOUND_MPS),
-        *heading(drone_velocity_world_mps, VELOCITY_BOUND_MPS),
-        *bbox_norm,
+        *_heading(rel, c, s, POSITION_BOUND_M),
+        *_heading(estimate.velocity_world_mps, c, s, VELOCITY_BOUND_MPS),
+        *_heading(drone_velocity_world_mps, c, s, VELOCITY_BOUND_MPS),
+        *_bbox_norm(estimate.bbox, image_size_px),
         min(max(depth, 0.0), POSITION_BOUND_M),
         1.0 if estimate.valid else 0.0,
         min(time_lost_s, TIME_BOUND_S),
-        *imu_values,
+        *_imu_values(imu),
         min(max(estimate_age_s, 0.0), TIME_BOUND_S),
     ]
     # One float32 buffer per step (fresh each call), handed out as per-key views: one array
     # construction instead of nine.
     flat = np.array(values, np.float32)
     return {key: flat[lo:hi] for key, lo, hi in _LAYOUT}
+
+
+def _heading(v: FloatArray, c: float, s: float, bound: float) -> list[float]:
+    """R_heading_world v = Rz(yaw)^T v for v (3,) world, c, s = cos, sin of the yaw, clipped to +-bound;
+    zeros when v is not finite (unknown)."""
+    x, y, z = v.tolist()
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        return [0.0, 0.0, 0.0]
+    return [_clip(c * x + s * y, bound), _clip(-s * x + c * y, bound), _clip(z, bound)]
+
+
+def _bbox_norm(bbox: FloatArray, image_size_px: int) -> list[float]:
+    """(x, y, w, h) [px] -> (centre x, centre y, w, h) / image size, in [0, 1]; zeros when not finite."""
+    x, y, w, h = bbox.tolist()
+    if not all(math.isfinite(v) for v in (x, y, w, h)):
+        return [0.0, 0.0, 0.0, 0.0]
+    return [min(max(v / image_size_px, 0.0), 1.0) for v in (x + w / 2.0, y + h / 2.0, w, h)]
+
+
+def _imu_values(imu: ImuBatch) -> list[float]:
+    """The frame's mean specific force [m/s^2] and rate [rad/s], clipped to the sensor's full scale;
+    zeros when the frame has no finite sample."""
+    imu_mean = _imu_mean(imu)
+    if imu_mean is None:
+        return [0.0] * _IMU_ENTRIES
+    mean = imu_mean.tolist()
+    return [_clip(v, IMU_ACCEL_BOUND_MPS2) for v in mean[:3]] + [_clip(v, IMU_GYRO_BOUND_RADPS) for v in mean[3:]]
 
 
 def _imu_mean(imu: ImuBatch) -> FloatArray | None:

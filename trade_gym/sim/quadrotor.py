@@ -160,58 +160,73 @@ class Quadrotor:
         if self.body_id is None:
             raise RuntimeError("Quadrotor.physics_step called before spawn()")
         c, b, cfg = self.client_id, self.body_id, self.config
-        if self._last_read is not None:  # read_state() after the last step: same pybullet state
-            vel, m, (wx, wy, wz) = self._last_read
-            self._last_read = None
-        else:
-            _, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
-            vel, omega_w = p.getBaseVelocity(b, physicsClientId=c)
-            m = p.getMatrixFromQuaternion(quat, physicsClientId=c)  # row-major R_world_body
-            wx, wy, wz = _body_rates(m, omega_w)
+        # the reading of a read_state() since the last step (same pybullet state), else a fresh one
+        vel, m, w_body = self._last_read or self._query_reading()
+        self._last_read = None
         yaw = math.atan2(m[3], m[0])
-        fx, fy, fz = self._desired_specific_thrust(yaw, vel)
-        fn = math.sqrt(fx * fx + fy * fy + fz * fz)
-        zdx, zdy, zdz = fx / fn, fy / fn, fz / fn  # desired body z
-        # yaw setpoint: psi_d += r dt, kept within max_yaw_lead of the yaw
+        f = self._desired_specific_thrust(yaw, vel)
         rate_sp = self._setpoint[3]
-        lead = _wrap(self._yaw_sp + rate_sp * dt_s - yaw)
-        lead = min(max(lead, -cfg.max_yaw_lead_rad), cfg.max_yaw_lead_rad)
-        self._yaw_sp = yaw + lead
-        cy, sy = math.cos(self._yaw_sp), math.sin(self._yaw_sp)
-        # y_d = z_d x x_c / |.| with x_c = (cos psi_d, sin psi_d, 0); x_d = y_d x z_d
-        ydx, ydy, ydz = -zdz * sy, zdz * cy, zdx * sy - zdy * cy
-        yn = math.sqrt(ydx * ydx + ydy * ydy + ydz * ydz)
-        ydx, ydy, ydz = ydx / yn, ydy / yn, ydz / yn
-        xdx, xdy, xdz = ydy * zdz - ydz * zdy, ydz * zdx - ydx * zdz, ydx * zdy - ydy * zdx
-        # e_R = 1/2 vee(Rd^T R - R^T Rd); (Rd^T R)_ij = col_i(Rd) . col_j(R)
-        xb, yb, zb = (m[0], m[3], m[6]), (m[1], m[4], m[7]), (m[2], m[5], m[8])
-        ex = 0.5 * ((zdx * yb[0] + zdy * yb[1] + zdz * yb[2]) - (ydx * zb[0] + ydy * zb[1] + ydz * zb[2]))
-        ey = 0.5 * ((xdx * zb[0] + xdy * zb[1] + xdz * zb[2]) - (zdx * xb[0] + zdy * xb[1] + zdz * xb[2]))
-        ez = 0.5 * ((ydx * xb[0] + ydy * xb[1] + ydz * xb[2]) - (xdx * yb[0] + xdy * yb[1] + xdz * yb[2]))
-        # yawing at r with z_d fixed turns R_d about z_d at W = r (e_z . z_d) / (1 - (x_c . z_d)^2);
-        # desired body rate w_d = W R^T z_d
-        xc_dot_zd = cy * zdx + sy * zdy
-        spin = rate_sp * zdz / (1.0 - xc_dot_zd * xc_dot_zd)
-        ewx = wx - spin * (xb[0] * zdx + xb[1] * zdy + xb[2] * zdz)
-        ewy = wy - spin * (yb[0] * zdx + yb[1] * zdy + yb[2] * zdz)
-        ewz = wz - spin * (zb[0] * zdx + zb[1] * zdy + zb[2] * zdz)
-        jx, jy, jz = cfg.inertia_kgm2
-        ka, kr = self._k_att, self._k_rate
-        # tau = J (-kR e_R - kw e_w) + w x J w
-        torque = (
-            jx * (-ka * ex - kr * ewx) + (jz - jy) * wy * wz,
-            jy * (-ka * ey - kr * ewy) + (jx - jz) * wz * wx,
-            jz * (-ka * ez - kr * ewz) + (jy - jx) * wx * wy,
-        )
+        self._advance_yaw_setpoint(yaw, rate_sp, dt_s)
+        torque = self._attitude_torque(m, w_body, f, rate_sp)
         # collective thrust T = m f_z / z_b,z realises the vertical acceleration whatever the attitude lag
         weight = -cfg.mass_kg * self._gravity_z
-        thrust = cfg.mass_kg * fz / max(zb[2], _MIN_UPRIGHTNESS)
+        thrust = cfg.mass_kg * f[2] / max(m[8], _MIN_UPRIGHTNESS)
         thrust = min(max(thrust, 0.0), cfg.max_thrust_to_weight * weight)
         p.applyExternalForce(b, _BODY_LINK, (0.0, 0.0, thrust), _ORIGIN, p.LINK_FRAME, physicsClientId=c)
         p.applyExternalTorque(b, _BODY_LINK, torque, p.LINK_FRAME, physicsClientId=c)
         self._v_pre, self._m_pre, self._dt_s = vel, m, float(dt_s)
         self._reading = None  # the caller steps the simulation next
         self._t_s += float(dt_s)
+
+    def _query_reading(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, float, float]]:
+        """(velocity (3,) world [m/s], row-major R_world_body (9,), body rates (3,) [rad/s]) from pybullet."""
+        c, b = self.client_id, self.body_id
+        _, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
+        vel, omega_w = p.getBaseVelocity(b, physicsClientId=c)
+        m = p.getMatrixFromQuaternion(quat, physicsClientId=c)  # row-major R_world_body
+        return vel, m, _body_rates(m, omega_w)
+
+    def _advance_yaw_setpoint(self, yaw: float, rate_sp: float, dt_s: float) -> None:
+        """Yaw setpoint psi_d += r dt [rad], kept within max_yaw_lead of the current `yaw`."""
+        lead = _wrap(self._yaw_sp + rate_sp * dt_s - yaw)
+        lead = min(max(lead, -self.config.max_yaw_lead_rad), self.config.max_yaw_lead_rad)
+        self._yaw_sp = yaw + lead
+
+    def _attitude_torque(self, m: tuple[float, ...], w_body: tuple[float, float, float],
+                         f: tuple[float, float, float], rate_sp: float) -> tuple[float, float, float]:
+        """Body torque [N m] steering body z to the thrust direction `f` (3,) world and body x to the yaw
+        setpoint (geometric SO(3) PD law); m: row-major R_world_body (9,), w_body (3,) [rad/s]."""
+        fx, fy, fz = f
+        fn = math.sqrt(fx * fx + fy * fy + fz * fz)
+        zdx, zdy, zdz = fx / fn, fy / fn, fz / fn  # desired body z
+        cy, sy = math.cos(self._yaw_sp), math.sin(self._yaw_sp)
+        # y_d = z_d x x_c / |.| with x_c = (cos psi_d, sin psi_d, 0); x_d = y_d x z_d
+        ydx, ydy, ydz = -zdz * sy, zdz * cy, zdx * sy - zdy * cy
+        yn = math.sqrt(ydx * ydx + ydy * ydy + ydz * ydz)
+        ydx, ydy, ydz = ydx / yn, ydy / yn, ydz / yn
+        xdx, xdy, xdz = ydy * zdz - ydz * zdy, ydz * zdx - ydx * zdz, ydx * zdy - ydy * zdx
+        # body axes: the columns of R; x_b = (m0, m3, m6), y_b = (m1, m4, m7), z_b = (m2, m5, m8)
+        m0, m1, m2, m3, m4, m5, m6, m7, m8 = m
+        # e_R = 1/2 vee(Rd^T R - R^T Rd); (Rd^T R)_ij = col_i(Rd) . col_j(R)
+        ex = 0.5 * ((zdx * m1 + zdy * m4 + zdz * m7) - (ydx * m2 + ydy * m5 + ydz * m8))
+        ey = 0.5 * ((xdx * m2 + xdy * m5 + xdz * m8) - (zdx * m0 + zdy * m3 + zdz * m6))
+        ez = 0.5 * ((ydx * m0 + ydy * m3 + ydz * m6) - (xdx * m1 + xdy * m4 + xdz * m7))
+        # yawing at r with z_d fixed turns R_d about z_d at W = r (e_z . z_d) / (1 - (x_c . z_d)^2);
+        # desired body rate w_d = W R^T z_d
+        xc_dot_zd = cy * zdx + sy * zdy
+        spin = rate_sp * zdz / (1.0 - xc_dot_zd * xc_dot_zd)
+        wx, wy, wz = w_body
+        ewx = wx - spin * (m0 * zdx + m3 * zdy + m6 * zdz)
+        ewy = wy - spin * (m1 * zdx + m4 * zdy + m7 * zdz)
+        ewz = wz - spin * (m2 * zdx + m5 * zdy + m8 * zdz)
+        jx, jy, jz = self.config.inertia_kgm2
+        ka, kr = self._k_att, self._k_rate
+        # tau = J (-kR e_R - kw e_w) + w x J w
+        return (
+            jx * (-ka * ex - kr * ewx) + (jz - jy) * wy * wz,
+            jy * (-ka * ey - kr * ewy) + (jx - jz) * wz * wx,
+            jz * (-ka * ez - kr * ewz) + (jy - jx) * wx * wy,
+        )
 
     def fly(self, n_steps: int, dt_s: float, t_s: float,
             imu_truth: Callable[[float, tuple[float, ...], tuple[float, ...]], None]) -> float:
