@@ -305,3 +305,18 @@ def test_latency_report_pivots_error_and_tracked_by_latency_and_plots_them(tmp_p
     assert "scripted trade gt perception_latency_ms=100" in md  # the per-configuration table's label
     path = plots.plot_latency(results, "t", tmp_path / "latency.png")
     assert path is not None and path.stat().st_size > 0
+
+
+def test_paths_plot_draws_the_runs_world_under_the_paths():
+    """The top view's background is the run's own world (terrain and buildings), framed around the paths."""
+    spec = RunSpec("custom", "custom", "city", "scripted", "oracle", "gt", 0, 10, 32)
+    xy = np.array([[0.0, -45.0], [10.0, -35.0]])
+    fig, ax = plots.plt.subplots()
+    try:
+        plots._draw_terrain(ax, spec, xy)
+        (image,) = ax.get_images()
+        x0, x1, y0, y1 = image.get_extent()
+        assert x0 < 0.0 and x1 > 10.0 and y0 < -45.0 and y1 > -35.0 and x1 - x0 == pytest.approx(y1 - y0)
+        assert np.ptp(np.asarray(image.get_array())) > 0  # shading and a building, not a flat fill
+    finally:
+        plots.plt.close(fig)

@@ -16,9 +16,12 @@ import numpy.typing as npt  # noqa: E402
 
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M, FAIL_TRACKED_FRACTION  # noqa: E402
 from trade_gym.bench.runner import RunResult  # noqa: E402
+from trade_gym.bench.suites import RunSpec  # noqa: E402
 from trade_gym.bench.summary import config_label, spec_record  # noqa: E402
 from trade_gym.config import CAMERA_RATE_HZ  # noqa: E402
 
+TERRAIN_MARGIN_M = 5.0  # terrain shown around the paths [m]
+TERRAIN_IMAGE_PX = 400
 PANEL_SIZE_IN = (8.5, 3.2)  # one scene per panel, legend on the right [inch]
 DPI = 110
 LEGEND_FONT_SIZE = 7
@@ -88,19 +91,45 @@ def plot_paths(results: Sequence[RunResult], title: str, path: Path) -> Path | N
     fig, axes = _panels(len(grouped))
     for ax, (scene, configs) in zip(axes, grouped.items()):
         first_runs = [runs[0] for runs in configs.values()]
-        target = max(first_runs, key=lambda r: len(r.series.target_xy_m)).series.target_xy_m
+        longest = max(first_runs, key=lambda r: len(r.series.target_xy_m))
+        target = longest.series.target_xy_m
+        _draw_terrain(ax, longest.spec, np.vstack([target] + [r.series.drone_xy_m for r in first_runs]))
         ax.plot(target[:, 0], target[:, 1], "k-", lw=2.0, label="target")
         for label, run in zip(configs, first_runs):
             xy = run.series.drone_xy_m
-            line, = ax.plot(xy[:, 0], xy[:, 1], lw=1.0, label=f"drone: {label} (seed {run.spec.seed})")
+            short = label.split("/", 1)[1] if "/" in label else label  # the group name is in the title
+            line, = ax.plot(xy[:, 0], xy[:, 1], lw=1.0, label=short.replace("/", " "))
             if len(xy):
                 ax.plot(*xy[0], "o", color=line.get_color(), mfc="none")  # start (hover stays there)
         if len(target):
             ax.plot(*target[0], "ko")
-        ax.set(title=f"{title}: {scene}", xlabel="x east [m]", ylabel="y north [m]", aspect="equal")
+        ax.set(title=f"{title}: {scene}, world of seed {longest.spec.seed}", xlabel="x east [m]", ylabel="y north [m]",
+               aspect="equal")
         ax.grid(alpha=0.3)
         _legend_right(ax)
     return _save(fig, path)
+
+
+def _draw_terrain(ax: plt.Axes, spec: RunSpec, xy_m: npt.NDArray[np.float64]) -> None:
+    """The run's world under the paths: hill-shaded terrain and building footprints (`bench.dashboard`), in a
+    square around the points; the world is rebuilt from the run's seed (a reset, no rendering)."""
+    from trade_gym.bench.dashboard import ViewBox, terrain_image
+    from trade_gym.env import TradeFollowEnv
+
+    finite = xy_m[np.all(np.isfinite(xy_m), axis=1)]
+    if not len(finite):
+        return
+    lo, hi = finite.min(axis=0) - TERRAIN_MARGIN_M, finite.max(axis=0) + TERRAIN_MARGIN_M
+    side, centre = float(max(hi - lo)), (lo + hi) / 2.0
+    box = ViewBox(float(centre[0] - side / 2), float(centre[1] - side / 2), side, TERRAIN_IMAGE_PX)
+    env = TradeFollowEnv(**(spec.env_kwargs() | {"perception": "oracle", "render_mode": None}))
+    try:
+        env.reset(seed=spec.seed)
+        image = terrain_image(env.world, box)
+    finally:
+        env.close()
+    ax.imshow(image, extent=(box.x0_m, box.x0_m + side, box.y0_m, box.y0_m + side), origin="upper", zorder=0)
+    ax.set(xlim=(box.x0_m, box.x0_m + side), ylim=(box.y0_m, box.y0_m + side))
 
 
 STRIP_PANEL_IN = (4.2, 5.0)  # one metric per panel [inch]
