@@ -14,6 +14,7 @@ from trade_gym.perception.oracle import OracleConfig
 from trade_gym.reward import RewardConfig
 from trade_gym.sim.pose_source import VioConfig
 from trade_gym.sim.quadrotor import QuadrotorConfig
+from trade_gym.sim.scenes import DECOY_TIERS
 
 PERCEPTION_MODES = ("trade", "dcf", "oracle")
 POSE_SOURCES = ("gt", "vio")
@@ -61,6 +62,9 @@ class EnvConfig:
     # None: each reset's seed draws the world too. An int fixes the world (the "sequence") while the
     # reset seed still drives sensor noise, the start shift and the box perturbation (repeated runs).
     world_seed: int | None = None
+    # Decoy difficulty tier: "ambiguous" (the paper's scenes: identical decoys crossing, overtaking, parked beside
+    # the path), "parked" (only parked ones never in view with the target), "none" (`trade_gym.sim.world.DecoyTier`)
+    decoys: str = "ambiguous"
     # Oracle noise model (perception="oracle"): oracle_<name> is OracleConfig's <name> (`self.oracle`), with its
     # defaults (fitted to full TRADE's closed-loop errors on training worlds; see OracleConfig).
     oracle_box_sigma_px: float = OracleConfig.box_sigma_px  # box jitter per x, y, w, h [px]
@@ -90,6 +94,7 @@ class EnvConfig:
         check_choice("scene", self.scene, SCENE_NAMES)
         check_choice("perception", self.perception, PERCEPTION_MODES)
         check_choice("pose_source", self.pose_source, POSE_SOURCES)
+        check_choice("decoys", self.decoys, DECOY_TIERS)
         check_choice("render_mode", self.render_mode, RENDER_MODES)
         _check_latency(self.perception_latency, self.perception_latency_ms)
         require(is_int_at_least(self.camera_size, MIN_CAMERA_SIZE_PX, numpy_ints=False), "camera_size",

@@ -33,7 +33,7 @@ from trade_gym.sim.camera import Camera, CameraConfig, CameraFrame
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import make_pose_source
 from trade_gym.sim.quadrotor import Quadrotor
-from trade_gym.sim.world import World, build_world
+from trade_gym.sim.world import DecoyTier, World, build_world
 
 GRAVITY_MPS2 = 9.81
 GROUND_RAY_RANGE_M = 1000.0  # rays for the ground-depth truth reach this far beyond the drone's height [m]
@@ -118,7 +118,7 @@ class TradeFollowEnv(gym.Env):
     All fields of `trade_gym.config.EnvConfig`, e.g. `scene`, `perception`, `pose_source`,
     `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches,
     `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0), and
-    the components' configs `reward=`, `quadrotor=` and `vio=` (each the config or a mapping of its fields).
+    the components' configs `reward=`, `quadrotor=` and `vio=` (each the config or a mapping of its fields), `decoys`.
 
     ## Version History
     - v0: initial release.
@@ -133,6 +133,7 @@ class TradeFollowEnv(gym.Env):
       it; the frame guards are `trade`'s. Same values.
     - v0, issue 17: `drone_vel_mps` comes from the pose source (with `vio`: rotated by the yaw drift, plus a
       bounded velocity error, `VioConfig`), no longer from the simulator's true state.
+    - v0, issue 19: `decoys=` ("ambiguous", the default and as before; "parked"; "none"), see `DecoyTier`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -141,12 +142,8 @@ class TradeFollowEnv(gym.Env):
         self.config = EnvConfig(**kwargs)
         self.render_mode = self.config.render_mode
         self.quad_config = self.config.quadrotor
-        self.camera_config = CameraConfig(
-            width_px=self.config.camera_size,
-            height_px=self.config.camera_size,
-            fov_deg=self.config.camera_fov_deg,
-            pitch_deg=self.config.camera_pitch_deg,
-        )
+        self.camera_config = CameraConfig(width_px=self.config.camera_size, height_px=self.config.camera_size,
+                                          fov_deg=self.config.camera_fov_deg, pitch_deg=self.config.camera_pitch_deg)
         self.imu_config = ImuConfig(noise=self.config.imu_noise)
         self.action_space = action_space()
         self.observation_space = observation_space()
@@ -179,7 +176,8 @@ class TradeFollowEnv(gym.Env):
         p.setTimeStep(1.0 / PHYSICS_RATE_HZ, physicsClientId=cid)
         rng = self.np_random
         world_rng = rng if self.config.world_seed is None else np.random.default_rng(self.config.world_seed)
-        self.world = build_world(cid, self.config.scene, world_rng, self.config.target_speed_mps)
+        self.world = build_world(cid, self.config.scene, world_rng, self.config.target_speed_mps,
+                                 DecoyTier(self.config.decoys, self.config.camera_fov_deg))
         start_position, start_yaw = self.world.drone_start()
         self.quadrotor.spawn(start_position, start_yaw)
         self._state = self.quadrotor.read_state()

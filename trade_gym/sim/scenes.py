@@ -77,6 +77,11 @@ SCENES: MappingProxyType[str, SceneSpec] = MappingProxyType(
 )
 
 
+# Difficulty tiers of the decoys (`trade_gym.sim.world.DecoyTier`): none, parked far from the target's route only,
+# or all of them (the paper's scenes).
+DECOY_TIERS = ("none", "parked", "ambiguous")
+
+
 def get_scene(name: str) -> SceneSpec:
     """SceneSpec by name; ValueError listing the valid names otherwise."""
     try:

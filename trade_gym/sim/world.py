@@ -5,6 +5,9 @@ Owns `World` and `build_world`; every pybullet call names the client explicitly.
 
 from __future__ import annotations
 
+import dataclasses
+import math
+from dataclasses import dataclass
 from types import MappingProxyType
 
 import numpy as np
@@ -13,13 +16,13 @@ import pybullet as p
 
 from trade_gym.sim import city, desert, mountain
 from trade_gym.sim.bullet_lists import bullet_list
-from trade_gym.sim.layout import SceneLayout
+from trade_gym.sim.layout import SceneLayout, parked
 from trade_gym.sim.meshes import (
     TEXTURE_PERIOD_M, Mesh, building_meshes, create_terrain_visual, placed_meshes, polygon_mesh, rock_mesh,
     strip_mesh, texture_path,
 )
 from trade_gym.sim.roofs import RoofIndex
-from trade_gym.sim.scenes import SceneSpec, get_scene
+from trade_gym.sim.scenes import DECOY_TIERS, SceneSpec, get_scene
 from trade_gym.sim.terrain import Heightfield
 from trade_gym.sim.vehicle_poses import VehiclePoses
 from trade_gym.sim.vehicles import Vehicle, VehicleMotion, create_vehicle_body, create_vehicle_shape, vehicle_model
@@ -201,13 +204,82 @@ class World:
         return self.layout.drone_start_m.copy(), self.layout.drone_yaw_rad
 
 
-def build_world(client_id: int, scene: str, rng: np.random.Generator, target_speed_mps: float | None = None) -> World:
-    """Generate and build `scene` in a freshly reset pybullet client (same rng state -> same world)."""
+ROUTE_SAMPLE_M = 1.0  # spacing of the target route's points a parked decoy's distance is measured to
+
+
+PARK_BAND = 0.5  # parked decoys of the "parked" tier stand 1 to 1.5 times the far distance from the route
+PARK_TRIES = 50  # placements tried per parked decoy before it is dropped
+PARK_SPACING_M = 6.0  # between parked decoys of the "parked" tier
+PARK_EDGE_MARGIN_M = 10.0  # kept from the terrain's edge
+PARK_BUILDING_MARGIN_M = 2.0  # kept from a building's footprint
+
+
+@dataclass(frozen=True)
+class DecoyTier:
+    """Which decoys a world has: "ambiguous", the drawn ones (the paper's scenes: identical decoys crossing,
+    overtaking, parked beside the path); "parked", as many parked ones, each never in view together with the
+    target; "none".
+
+    "Never in view together": farther from every point of the target's route than the half-diagonal of the
+    camera's ground footprint at the scene's follow height, h tan(fov / 2) sqrt(2), so a drone above the target
+    never sees both; a drone off the target (the city's start on a roof, tilting while it accelerates) may see
+    one at the image's edge, far from the target. The parked places come from a child stream of the world's generator, so the rest of the
+    world is the same in every tier."""
+
+    tier: str = "ambiguous"
+    camera_fov_deg: float = 110.0
+
+    def __post_init__(self) -> None:
+        if self.tier not in DECOY_TIERS:
+            raise ValueError(f"decoys must be one of {DECOY_TIERS}, got {self.tier!r}")
+
+    def far_from_route_m(self, follow_height_m: float) -> float:
+        return follow_height_m * math.tan(math.radians(self.camera_fov_deg) / 2.0) * math.sqrt(2.0)
+
+    def select(self, layout: SceneLayout, rng: np.random.Generator) -> tuple[VehicleMotion, ...]:
+        if self.tier == "ambiguous":
+            return layout.decoys
+        if self.tier == "none":
+            return ()
+        return _park_away(layout, self.far_from_route_m(layout.spec.follow_altitude_agl_m), rng.spawn(1)[0])
+
+
+def _route_points(layout: SceneLayout) -> FloatArray:
+    path = layout.target.path
+    return np.asarray(path.position_m(np.arange(0.0, path.length_m + ROUTE_SAMPLE_M, ROUTE_SAMPLE_M)))[:, :2]
+
+
+def _park_away(layout: SceneLayout, far_m: float, rng: np.random.Generator) -> tuple[VehicleMotion, ...]:
+    """As many parked decoys as `layout` drew, each farther than `far_m` from the target's route, on the terrain,
+    clear of buildings and of each other; a decoy without such a place after PARK_TRIES is dropped."""
+    path, route, spots = layout.target.path, _route_points(layout), []
+    edge = layout.spec.terrain_size_m / 2.0 - PARK_EDGE_MARGIN_M
+    lo, hi = layout.buildings_lo_m[:, :2] - PARK_BUILDING_MARGIN_M, layout.buildings_hi_m[:, :2] + PARK_BUILDING_MARGIN_M
+    for _ in layout.decoys:
+        for _ in range(PARK_TRIES):
+            s = rng.uniform(0.0, path.length_m)
+            tx, ty = np.asarray(path.tangent(s))[:2]
+            offset = rng.choice([-1.0, 1.0]) * far_m * (1.0 + rng.uniform(0.0, PARK_BAND))
+            xy = np.asarray(path.position_m(s))[:2] + offset * np.array([-ty, tx])
+            clear = (np.all(np.abs(xy) < edge) and float(np.min(np.hypot(*(route - xy).T))) > far_m
+                     and not np.any(np.all((xy > lo) & (xy < hi), axis=1))
+                     and all(np.hypot(*(xy - spot)) > PARK_SPACING_M for spot in spots))
+            if clear:
+                spots.append(xy)
+                break
+    return tuple(parked(xy, float(rng.uniform(-math.pi, math.pi))) for xy in spots)
+
+
+def build_world(client_id: int, scene: str, rng: np.random.Generator, target_speed_mps: float | None = None,
+                decoys: DecoyTier = DecoyTier()) -> World:
+    """Generate and build `scene` in a freshly reset pybullet client (same rng state -> same world); `decoys`
+    picks which of the drawn decoys are built."""
     spec = get_scene(scene)
     speed = spec.target_speed_mps if target_speed_mps is None else float(target_speed_mps)
     if not np.isfinite(speed) or speed <= 0.0:
         raise ValueError(f"target_speed_mps must be finite and > 0, got {target_speed_mps!r}")
     layout = make_layout(spec, rng, speed)
+    layout = dataclasses.replace(layout, decoys=decoys.select(layout, rng))
     names = {spec.ground_texture, "vehicle_palette"} | ({"rock"} if layout.boulders else set())
     names |= {"facade", "roof"} if len(layout.buildings_lo_m) else set()
     names |= {"dirt_road"} if layout.road is not None else set()
