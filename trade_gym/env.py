@@ -28,7 +28,7 @@ from trade_gym.observation import build_observation, observation_space
 from trade_gym.perception.base import PerceptionOutput, SensorFrame
 from trade_gym.perception.factory import make_perception
 from trade_gym.reward import compute_reward
-from trade_gym.scoring import EnvFrame, ScoredEstimate, env_info, reward_inputs, score_estimate
+from trade_gym.scoring import EnvFrame, FollowBand, ScoredEstimate, env_info, reward_inputs, score_estimate
 from trade_gym.sim.camera import Camera, CameraConfig, CameraFrame
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import make_pose_source
@@ -442,7 +442,9 @@ class TradeFollowEnv(gym.Env):
             image_size_px=self.config.camera_size,
         )
 
-    def _info(self, truth: GroundTruth, held: ScoredEstimate, crashed: bool,
-              terms: dict[str, float] | None) -> dict[str, Any]:
-        return env_info(truth, held, EnvFrame(self._t_s, self._state.position_m, self._estimate_age_s, crashed),
+    def _info(self, truth: GroundTruth, held: ScoredEstimate, crashed: bool, terms: dict | None) -> dict[str, Any]:
+        visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
+        inputs = reward_inputs(truth, self.world, self._state.position_m, visible, (), crashed)
+        band = FollowBand.of(self.world.spec.follow_altitude_agl_m, self.config.camera_fov_deg).holds(inputs)
+        return env_info(truth, held, EnvFrame(self._t_s, self._state.position_m, self._estimate_age_s, crashed, band),
                         self.config.visible_fraction_threshold, terms)

@@ -34,7 +34,13 @@ METRIC_NAMES = (
     "longest_lost_streak_s", "decoy_switches", "ground_depth_rmse_m", "ground_depth_frames",
     "target_depth_rmse_m", "target_depth_frames", "mean_horizontal_error_m", "crashed",
     "ground_depth_bias_m", "initial_iou",
+    "success", "following_rate", "collision_rate", "nre", "dre", "adq",
 )
+# EVT-Bench style: an episode succeeds without a crash and with the drone in the following band (`info["following"]`,
+# `trade_gym.scoring.FollowBand`) on at least this fraction of its frames.
+SUCCESS_FOLLOWING_RATE = 0.9
+# VOTS: absence-detection quality needs more absent frames than this to be defined.
+ADQ_MIN_ABSENT_FRAMES = 10
 
 
 def on_decoy(est_bbox: Sequence[float], est_iou: float, decoy_bboxes: Sequence[Sequence[float]]) -> bool:
@@ -177,6 +183,54 @@ def crashed(infos: Sequence[Info]) -> bool:
     return any(bool(i["crashed"]) for i in infos)
 
 
+def following_rate(infos: Sequence[Info]) -> float:
+    """Fraction of the frames with the drone in the following band; NaN without frames or without the band in
+    the infos (an open-loop replay flies nothing)."""
+    if not infos or any("following" not in i for i in infos):
+        return math.nan
+    return float(np.mean(_column(infos, "following", bool)))
+
+
+def success(infos: Sequence[Info]) -> bool | None:
+    """EVT-style success: no crash and the following band held on at least SUCCESS_FOLLOWING_RATE of the frames;
+    None where the following rate is undefined."""
+    rate = following_rate(infos)
+    return None if math.isnan(rate) else (not crashed(infos) and rate >= SUCCESS_FOLLOWING_RATE)
+
+
+def vots_classes(infos: Sequence[Info]) -> dict[str, int]:
+    """VOTS per-frame classes, from the truth's visibility and whether the estimate reports the target (a fresh
+    box, `est_valid`): visible and reported with overlap: tracked; visible, reported, no overlap: failure (drift);
+    visible, not reported: miss; absent and reported: hallucination; absent, not reported: notice."""
+    visible, reported = _visible(infos), _column(infos, "est_valid", bool)
+    overlap = _column(infos, "iou") > 0.0
+    return {"tracked": int(np.sum(visible & reported & overlap)), "failure": int(np.sum(visible & reported & ~overlap)),
+            "miss": int(np.sum(visible & ~reported)), "hallucination": int(np.sum(~visible & reported)),
+            "notice": int(np.sum(~visible & ~reported))}
+
+
+def not_reported_error(infos: Sequence[Info]) -> float:
+    """VOTS NRE: of the frames with the target visible, the fraction it is not reported; NaN without one."""
+    c = vots_classes(infos)
+    present = c["tracked"] + c["failure"] + c["miss"]
+    return c["miss"] / present if present else math.nan
+
+
+def drift_rate_error(infos: Sequence[Info]) -> float:
+    """VOTS DRE: of the frames with the target visible, the fraction reported without overlap; NaN without one."""
+    c = vots_classes(infos)
+    present = c["tracked"] + c["failure"] + c["miss"]
+    return c["failure"] / present if present else math.nan
+
+
+def absence_detection_quality(infos: Sequence[Info]) -> float:
+    """VOTS ADQ: of the frames with the target absent, the fraction not reported; NaN with at most
+    ADQ_MIN_ABSENT_FRAMES absent frames."""
+    c = vots_classes(infos)
+    absent = c["hallucination"] + c["notice"]
+    return c["notice"] / absent if absent > ADQ_MIN_ABSENT_FRAMES else math.nan
+
+
 def steps_per_second(steps: int, wall_s: float) -> float:
     """Env steps per wall-clock second (a timing figure, kept apart from the scores)."""
     return steps / wall_s if wall_s > 0.0 else float("nan")
@@ -200,4 +254,10 @@ def episode_metrics(infos: Sequence[Info], frame_dt_s: float = FRAME_DT_S) -> di
         "crashed": crashed(infos),
         "ground_depth_bias_m": depth_bias(infos, "ground"),
         "initial_iou": initial_iou(infos),
+        "success": success(infos),
+        "following_rate": following_rate(infos),
+        "collision_rate": float(crashed(infos)),  # per episode 0 or 1: a suite's mean is the rate
+        "nre": not_reported_error(infos),
+        "dre": drift_rate_error(infos),
+        "adq": absence_detection_quality(infos),
     }

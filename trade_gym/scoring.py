@@ -109,12 +109,39 @@ def estimate_scores(truth: GroundTruth, scored: ScoredEstimate, visible_fraction
 @dataclass(frozen=True, eq=False)
 class EnvFrame:
     """What the env's info says of the frame besides the estimate: time [s], drone position (3,) world [m], the
-    held estimate's age [s], whether the drone crashed."""
+    held estimate's age [s], whether the drone crashed, whether it is in the following band."""
 
     t_s: float
     drone_position_m: FloatArray
     estimate_age_s: float
     crashed: bool
+    following: bool
+
+
+FOLLOW_BAND_FOOTPRINT_FRACTION = 0.5  # of the footprint's half-width: the target in the image's central half
+FOLLOW_BAND_HEIGHT_FRACTION = 0.25  # of the follow height
+
+
+@dataclass(frozen=True)
+class FollowBand:
+    """EVT-style following band, from the follow geometry: on a frame the drone follows when the target is in view,
+    its horizontal distance to the target is at most half the camera footprint's half-width at the follow height h,
+    h tan(fov / 2) / 2 (the target in the central half of the downward image, where a follower keeps it through
+    turns and the tracker's search window holds it), and its height above the target's ground is within 25 % of h
+    (the target's image scale within 25 % of the follow geometry's)."""
+
+    follow_height_m: float
+    max_distance_m: float
+
+    @classmethod
+    def of(cls, follow_height_m: float, camera_fov_deg: float) -> FollowBand:
+        half_width_m = follow_height_m * math.tan(math.radians(camera_fov_deg) / 2.0)
+        return cls(follow_height_m, FOLLOW_BAND_FOOTPRINT_FRACTION * half_width_m)
+
+    def holds(self, x: RewardInputs) -> bool:
+        height_error = abs(x.height_above_target_ground_m - self.follow_height_m)
+        return bool(x.target_visible and x.horizontal_distance_m <= self.max_distance_m
+                    and height_error <= FOLLOW_BAND_HEIGHT_FRACTION * self.follow_height_m)
 
 
 def env_info(truth: GroundTruth, held: ScoredEstimate, frame: EnvFrame, visible_fraction_threshold: float,
@@ -130,6 +157,7 @@ def env_info(truth: GroundTruth, held: ScoredEstimate, frame: EnvFrame, visible_
         "drone_position_m": frame.drone_position_m,
         "target_position_m": truth.target_position_m,
         "horizontal_distance_m": horizontal_distance_m(frame.drone_position_m, truth.target_position_m),
+        "following": frame.following,
         # The boxes (x, y, w, h) [px] of the decoys in view, as a tuple of tuples: no NaN (check_env
         # compares infos) and no ndarray whose shape changes per frame (vector envs stack those).
         "decoy_bboxes": tuple(decoys),

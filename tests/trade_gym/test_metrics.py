@@ -17,7 +17,8 @@ def info(iou=1.0, visible=True, on_decoy=False, g=(10.0, 10.0), t=(9.0, 9.0), di
          gt=GT_BOX, est=GT_BOX):
     return {"iou": iou, "target_visible": visible, "on_decoy": on_decoy, "ground_depth_est": g[0],
             "ground_depth_gt": g[1], "target_depth_est": t[0], "target_depth_gt": t[1],
-            "horizontal_distance_m": dist, "crashed": crash, "gt_bbox": np.array(gt), "est_bbox": np.array(est)}
+            "horizontal_distance_m": dist, "crashed": crash, "gt_bbox": np.array(gt), "est_bbox": np.array(est),
+            "est_valid": est is not NO_BOX, "following": True}
 
 
 def shifted(dx_px: float) -> tuple[float, float, float, float]:

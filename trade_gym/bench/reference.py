@@ -77,6 +77,12 @@ TOLERANCES: dict[str, Tolerance] = {
     "crashed": EXACT,
     "ground_depth_bias_m": FLOAT_DRIFT,
     "initial_iou": FLOAT_DRIFT,
+    "success": EXACT,
+    "following_rate": FLOAT_DRIFT,
+    "collision_rate": EXACT,
+    "nre": FLOAT_DRIFT,
+    "dre": FLOAT_DRIFT,
+    "adq": FLOAT_DRIFT,
 }
 
 

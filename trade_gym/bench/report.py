@@ -47,6 +47,22 @@ def generic_table(records: Sequence[Record]) -> list[str]:
     return table(header, rows)
 
 
+# The scorecard's columns: EVT-Bench style per episode, VOTS style per frame (`trade_gym.metrics`).
+SCORECARD = (("success", "success rate"), ("following_rate", "following rate"), ("collision_rate", "collision rate"),
+             ("nre", "NRE"), ("dre", "DRE"), ("adq", "ADQ"))
+
+
+def scorecard_table(records: Sequence[Record]) -> list[str]:
+    """Success, following and collision rates and NRE / DRE / ADQ per configuration; nothing for results
+    written before the scorecard existed."""
+    if not any(r["metrics"].get("success", {}).get("n", 0) for r in records):
+        return []
+    rows = [[r["scene"], config_label(r)] + [mean_pm(r["metrics"][key]) for key, _ in SCORECARD] for r in records]
+    return ["Scorecard: success (no crash, in the following band on >= 90 % of frames), following and collision "
+            "rates; VOTS not-reported and drift-rate errors, absence-detection quality (> 10 absent frames).", ""] + \
+        table(["scene", "configuration"] + [label for _, label in SCORECARD], rows) + [""]
+
+
 def _scenes(records: Sequence[Record]) -> list[str]:
     return list(dict.fromkeys(r["scene"] for r in records))
 
@@ -171,10 +187,10 @@ def render_markdown(summary: Sequence[Record], meta: Record, titles: dict[str, s
         lines += [f"## {titles.get(group, group)}", ""]
         pivot = PIVOTS.get(records[0]["kind"])
         if pivot is None:
-            lines += generic_table(records) + [""]
+            lines += generic_table(records) + [""] + scorecard_table(records)
         else:
             lines += pivot(records) + ["", "<details><summary>all configurations</summary>", ""]
-            lines += generic_table(records) + ["", "</details>", ""]
+            lines += generic_table(records) + [""] + scorecard_table(records) + ["</details>", ""]
     if failures:
         lines += ["## Failed runs", ""] + [f"- {f}" for f in failures] + [""]
     if plots:

@@ -23,7 +23,7 @@ from trade_gym.bench.suites import RunSpec
 from trade_gym.bench.summary import spec_record
 from trade_gym.provenance import cpu_model, git_commit  # noqa: F401  (git_commit: re-exported)
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: the scorecard metrics (success, following_rate, collision_rate, nre, dre, adq)
 SCHEMA_FILE = "results.schema.json"
 PACKAGES = ("numpy", "pybullet", "gymnasium", "opencv-python-headless", "onnxruntime", "stable-baselines3",
             "filterpy", "matplotlib", "ray", "trade-gym")

@@ -46,6 +46,11 @@ def spec_record(spec: RunSpec) -> dict[str, Any]:
             "switches": dict(spec.switches), "depth_kind": spec.depth_kind}
 
 
+def _number(value: Any) -> float:
+    """A metric as a float; NaN when undefined or absent (results written before the metric existed)."""
+    return math.nan if value is None else float(value)
+
+
 def summarise(results: Sequence[RunResult]) -> list[dict[str, Any]]:
     """One record per configuration, in first-appearance order."""
     by_config: dict[str, list[RunResult]] = {}
@@ -55,7 +60,7 @@ def summarise(results: Sequence[RunResult]) -> list[dict[str, Any]]:
     for runs in by_config.values():
         ok = [r for r in runs if r.error is None]
         record = spec_record(runs[0].spec) | {"n_runs": len(runs), "n_failed": len(runs) - len(ok)}
-        record["metrics"] = {name: metric_stats([float(r.metrics[name]) for r in ok]) for name in METRIC_NAMES}
+        record["metrics"] = {name: metric_stats([_number(r.metrics.get(name)) for r in ok]) for name in METRIC_NAMES}
         for kind in DEPTH_KINDS:
             record[f"pooled_{kind}_depth_rmse_m"] = pooled_rmse(
                 [r.metrics[f"{kind}_depth_rmse_m"] for r in ok], [r.metrics[f"{kind}_depth_frames"] for r in ok])

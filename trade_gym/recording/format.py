@@ -117,6 +117,7 @@ class FrameTruth:
     crashed: bool = False
     vehicles: tuple[VehicleTruth, ...] = ()
     t_s: float = math.nan
+    following: bool | None = None  # the drone in the following band (`trade_gym.scoring.FollowBand`); None: unknown
 
     def decoy_bboxes_in_view(self) -> list[tuple[float, ...]]:
         """The decoys' boxes that are in view, as the env's `info["decoy_bboxes"]`."""

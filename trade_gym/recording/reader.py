@@ -263,6 +263,7 @@ def _truth(value: dict[str, Any]) -> FrameTruth:
         target_velocity_world_mps=_vector(value.get("target_velocity_world_mps")),
         drone_position_world_m=_vector(value.get("drone_position_world_m")),
         crashed=bool(value.get("crashed", False)),
+        following=None if value.get("following") is None else bool(value["following"]),
         vehicles=tuple(vehicles),
         t_s=decode_real(value.get("t_s")),
     )

@@ -185,7 +185,7 @@ def _info(frame: SequenceFrame, truth: GroundTruth, held: ScoredEstimate, thresh
     recorded truth as the env's)."""
     recorded = frame.truth
     drone, target = recorded.drone_position_world_m, recorded.target_position_world_m
-    return {
+    info = {
         "t_s": recorded.t_s if math.isfinite(recorded.t_s) else frame.t_s,  # the true time, as the env's info
         **estimate_scores(truth, held, threshold, recorded.decoy_bboxes_in_view()),
         "crashed": recorded.crashed,
@@ -193,6 +193,9 @@ def _info(frame: SequenceFrame, truth: GroundTruth, held: ScoredEstimate, thresh
         "target_position_m": target,
         "horizontal_distance_m": horizontal_distance_m(drone, target),
     }
+    if recorded.following is not None:  # recorded by the env (not by an older recording or a real flight log)
+        info["following"] = recorded.following
+    return info
 
 
 def _settings_match(sequence: Sequence, settings: ReplaySettings) -> bool | None:

@@ -130,6 +130,7 @@ class RecordSequence(gym.Wrapper):
             target_velocity_world_mps=truth.target_velocity_mps,
             drone_position_world_m=np.asarray(info["drone_position_m"], dtype=np.float64),
             crashed=bool(info["crashed"]),
+            following=info.get("following"),
             vehicles=tuple(vehicles),
             t_s=float(info["t_s"]),
         )

@@ -55,6 +55,7 @@ FIELD_DOCS: dict[str, str] = {
     "truth.target_velocity_world_mps": "target's velocity, world frame [m/s]",
     "truth.drone_position_world_m": "drone's body origin, world frame [m]",
     "truth.crashed": "the drone hit terrain or a building in this frame's interval",
+    "truth.following": "the drone in the env's following band this frame (null: not recorded)",
     "truth.vehicles": "every vehicle: instance_id (its seg/ value), class (vehicle kind), role (target or "
                       "decoy), bbox_xywh_px (visible box [px], null when not in view)",
     "faults": "sensor faults active at the frame (trade_gym.faults kinds)",
@@ -142,6 +143,7 @@ def frame_line(index: int, record: FrameRecord, files: dict[str, str | None]) ->
             "target_velocity_world_mps": encode_reals(t.target_velocity_world_mps),
             "drone_position_world_m": encode_reals(t.drone_position_world_m),
             "crashed": bool(t.crashed),
+            "following": None if t.following is None else bool(t.following),
             "vehicles": [{"instance_id": int(v.instance_id), "class": v.vehicle_class, "role": v.role,
                           "bbox_xywh_px": encode_box(v.bbox_xywh_px)} for v in t.vehicles],
         }
