@@ -95,3 +95,18 @@ def test_no_decoys_and_bad_tier():
     assert EnvConfig().decoys == "ambiguous"
     with pytest.raises(ValueError, match="decoys must be one of"):
         EnvConfig(decoys="many")
+
+
+@pytest.mark.parametrize("tier", ["none", "parked"])
+def test_check_env_passes_with_each_decoy_tier(tier):
+    import warnings
+
+    from gymnasium.utils.env_checker import check_env
+
+    env = TradeFollowEnv(scene="desert", perception="oracle", decoys=tier, episode_duration_s=1.0)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            check_env(env, skip_render_check=True)
+    finally:
+        env.close()
