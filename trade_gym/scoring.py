@@ -118,17 +118,17 @@ class EnvFrame:
     following: bool
 
 
-FOLLOW_BAND_FOOTPRINT_FRACTION = 0.5  # of the footprint's half-width: the target in the image's central half
+FOLLOW_BAND_FOOTPRINT_FRACTION = 0.25  # of the footprint's half-width: the target in the image's central quarter
 FOLLOW_BAND_HEIGHT_FRACTION = 0.25  # of the follow height
 
 
 @dataclass(frozen=True)
 class FollowBand:
     """EVT-style following band, from the follow geometry: on a frame the drone follows when the target is in view,
-    its horizontal distance to the target is at most half the camera footprint's half-width at the follow height h,
-    h tan(fov / 2) / 2 (the target in the central half of the downward image, where a follower keeps it through
-    turns and the tracker's search window holds it), and its height above the target's ground is within 25 % of h
-    (the target's image scale within 25 % of the follow geometry's)."""
+    its horizontal distance to the target is at most a quarter of the camera footprint's half-width at the follow
+    height h, h tan(fov / 2) / 4 (4-11 m across the scenes: room for a follower's lag in a turn, while a drone that
+    lets the target drift into the image's outer part, e.g. by hovering, leaves the band), and its height above
+    the target's ground is within 25 % of h (the target's image scale within 25 % of the follow geometry's)."""
 
     follow_height_m: float
     max_distance_m: float

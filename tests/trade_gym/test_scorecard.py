@@ -52,7 +52,7 @@ def band_inputs(distance_m: float, height_m: float, visible: bool = True) -> Rew
 def test_follow_band_edges_follow_the_geometry():
     band = FollowBand.of(H, FOV)
     half_width = H * math.tan(math.radians(FOV) / 2)
-    assert band.max_distance_m == pytest.approx(half_width / 2)
+    assert band.max_distance_m == pytest.approx(half_width / 4)
     assert band.holds(band_inputs(band.max_distance_m, H))
     assert not band.holds(band_inputs(band.max_distance_m * 1.01, H))
     tol = FOLLOW_BAND_HEIGHT_FRACTION * H
