@@ -206,6 +206,20 @@ def test_cli_tiny_oracle_run_writes_schema_valid_outputs_with_timing_apart(tmp_p
     assert (tmp_path / "b" / "results.md").read_text() == md
     assert deterministic_part(again) == deterministic_part(doc) and again["meta"] == doc["meta"]
     assert (tmp_path / "b" / "custom_iou.png").stat().st_size > 0
+    assert "Scorecard" in md and "| desert | scripted oracle gt | 1 ± 0 |" in md  # success rate 1
+    # a results.json written before the scorecard existed renders, its scorecard undefined (null)
+    old = json.loads((tmp_path / "a" / "results.json").read_text())
+    for run in old["runs"]:
+        run["metrics"] = {k: v for k, v in run["metrics"].items() if k not in SCORECARD_KEYS}
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "results.json").write_text(json.dumps(old))
+    assert cli.main(["--report", str(tmp_path / "old"), "--out", str(tmp_path / "c")]) == 0
+    rendered = json.loads((tmp_path / "c" / "results.json").read_text())
+    assert all(r["metrics"][k] is None for r in rendered["runs"] for k in SCORECARD_KEYS)
+    assert "Scorecard" not in (tmp_path / "c" / "results.md").read_text()
+
+
+SCORECARD_KEYS = ("success", "following_rate", "collision_rate", "nre", "dre", "adq")
 
 
 @pytest.mark.parametrize("where", ["missing", "same folder"])

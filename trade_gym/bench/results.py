@@ -21,6 +21,7 @@ import numpy as np
 from trade_gym.bench.runner import RunResult, RunSeries, RunTiming
 from trade_gym.bench.suites import RunSpec
 from trade_gym.bench.summary import spec_record
+from trade_gym.metrics import METRIC_NAMES
 from trade_gym.provenance import cpu_model, git_commit  # noqa: F401  (git_commit: re-exported)
 
 SCHEMA_VERSION = 2  # 2: the scorecard metrics (success, following_rate, collision_rate, nre, dre, adq)
@@ -122,8 +123,10 @@ def load_results(path: Path) -> tuple[list[RunResult], dict[str, Any]]:
         series = (RunSeries(*(arrays[k].astype(np.float64) for k in keys))
                   if arrays is not None and all(k in arrays for k in keys) else None)
         timing = RunTiming(**{k: math.nan if v is None else v for k, v in run["timing"].items()})
-        results.append(RunResult(_spec_of(run), _nan_for_none(run["metrics"]), timing, series, run["error"],
-                                 run.get("trajectory_sha256")))
+        metrics = _nan_for_none(run["metrics"])
+        if metrics:  # a metric added after the file was written (e.g. the scorecard) is undefined there
+            metrics = {name: math.nan for name in METRIC_NAMES} | metrics
+        results.append(RunResult(_spec_of(run), metrics, timing, series, run["error"], run.get("trajectory_sha256")))
     meta = dict(document["meta"])
     meta.setdefault("backend", "local")  # results.json written before the Ray backend existed: runs were local
     meta.setdefault("ray_address", None)
