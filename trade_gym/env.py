@@ -27,8 +27,8 @@ from trade_gym.latency import EstimateDelay
 from trade_gym.observation import build_observation, observation_space
 from trade_gym.perception.base import PerceptionOutput, SensorFrame
 from trade_gym.perception.factory import make_perception
-from trade_gym.reward import compute_reward
-from trade_gym.scoring import EnvFrame, FollowBand, ScoredEstimate, env_info, reward_inputs, score_estimate
+from trade_gym.reward import RewardInputs, compute_reward
+from trade_gym.scoring import EnvFrame, ScoredEstimate, env_info, follow_band, reward_inputs, score_estimate
 from trade_gym.sim.camera import Camera, CameraConfig, CameraFrame
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import make_pose_source
@@ -200,7 +200,9 @@ class TradeFollowEnv(gym.Env):
         self._estimate_delay = (None if self.config.perception_latency == "none"
                                 else EstimateDelay(self._t_s, ScoredEstimate.missing()))
         held = self._perceive(sensors, truth, lambda: self.perception.reset(sensors, init_box, rng))
-        return self._observe(held.estimate, sensors), self._info(truth, held, crashed=False, terms=None)
+        visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
+        inputs = reward_inputs(truth, self.world, self._state.position_m, visible, (), False)
+        return self._observe(held.estimate, sensors), self._info(truth, held, inputs, terms=None)
 
     def step(self, action):
         if self._client is None:
@@ -220,7 +222,7 @@ class TradeFollowEnv(gym.Env):
         terminated = crashed or self._time_target_hidden_s >= self.config.lost_timeout_s
         truncated = self._steps >= self.config.max_episode_steps and not terminated
         obs = self._observe(held.estimate, sensors)
-        return obs, reward, terminated, truncated, self._info(truth, held, crashed=crashed, terms=terms)
+        return obs, reward, terminated, truncated, self._info(truth, held, inputs, terms=terms)
 
     def render(self):
         if self.render_mode is None:
@@ -442,9 +444,7 @@ class TradeFollowEnv(gym.Env):
             image_size_px=self.config.camera_size,
         )
 
-    def _info(self, truth: GroundTruth, held: ScoredEstimate, crashed: bool, terms: dict | None) -> dict[str, Any]:
-        visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
-        inputs = reward_inputs(truth, self.world, self._state.position_m, visible, (), crashed)
-        band = FollowBand.of(self.world.spec.follow_altitude_agl_m, self.config.camera_fov_deg).holds(inputs)
-        return env_info(truth, held, EnvFrame(self._t_s, self._state.position_m, self._estimate_age_s, crashed, band),
+    def _info(self, truth: GroundTruth, held: ScoredEstimate, x: RewardInputs, terms: dict | None) -> dict[str, Any]:
+        band = follow_band(self.world.spec.follow_altitude_agl_m, self.config.camera_fov_deg).holds(x)
+        return env_info(truth, held, EnvFrame(self._t_s, self._state.position_m, self._estimate_age_s, x.crashed, band),
                         self.config.visible_fraction_threshold, terms)

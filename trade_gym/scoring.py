@@ -8,6 +8,7 @@ ground truth.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -142,6 +143,12 @@ class FollowBand:
         height_error = abs(x.height_above_target_ground_m - self.follow_height_m)
         return bool(x.target_visible and x.horizontal_distance_m <= self.max_distance_m
                     and height_error <= FOLLOW_BAND_HEIGHT_FRACTION * self.follow_height_m)
+
+
+@functools.lru_cache(maxsize=16)
+def follow_band(follow_height_m: float, camera_fov_deg: float) -> FollowBand:
+    """The scene's following band (cached: an env asks for it every step)."""
+    return FollowBand.of(follow_height_m, camera_fov_deg)
 
 
 def env_info(truth: GroundTruth, held: ScoredEstimate, frame: EnvFrame, visible_fraction_threshold: float,
