@@ -209,26 +209,29 @@ def vots_classes(infos: Sequence[Info]) -> dict[str, int]:
             "notice": int(np.sum(~visible & ~reported))}
 
 
+def vots_scores(classes: dict[str, int]) -> dict[str, float]:
+    """NRE and DRE (the miss and failure fractions of the frames with the target visible; NaN without one) and
+    ADQ (the notice fraction of the absent frames; NaN with at most ADQ_MIN_ABSENT_FRAMES of them)."""
+    present = classes["tracked"] + classes["failure"] + classes["miss"]
+    absent = classes["hallucination"] + classes["notice"]
+    return {"nre": classes["miss"] / present if present else math.nan,
+            "dre": classes["failure"] / present if present else math.nan,
+            "adq": classes["notice"] / absent if absent > ADQ_MIN_ABSENT_FRAMES else math.nan}
+
+
 def not_reported_error(infos: Sequence[Info]) -> float:
-    """VOTS NRE: of the frames with the target visible, the fraction it is not reported; NaN without one."""
-    c = vots_classes(infos)
-    present = c["tracked"] + c["failure"] + c["miss"]
-    return c["miss"] / present if present else math.nan
+    """VOTS NRE (`vots_scores`)."""
+    return vots_scores(vots_classes(infos))["nre"]
 
 
 def drift_rate_error(infos: Sequence[Info]) -> float:
-    """VOTS DRE: of the frames with the target visible, the fraction reported without overlap; NaN without one."""
-    c = vots_classes(infos)
-    present = c["tracked"] + c["failure"] + c["miss"]
-    return c["failure"] / present if present else math.nan
+    """VOTS DRE (`vots_scores`)."""
+    return vots_scores(vots_classes(infos))["dre"]
 
 
 def absence_detection_quality(infos: Sequence[Info]) -> float:
-    """VOTS ADQ: of the frames with the target absent, the fraction not reported; NaN with at most
-    ADQ_MIN_ABSENT_FRAMES absent frames."""
-    c = vots_classes(infos)
-    absent = c["hallucination"] + c["notice"]
-    return c["notice"] / absent if absent > ADQ_MIN_ABSENT_FRAMES else math.nan
+    """VOTS ADQ (`vots_scores`)."""
+    return vots_scores(vots_classes(infos))["adq"]
 
 
 def steps_per_second(steps: int, wall_s: float) -> float:
@@ -257,7 +260,5 @@ def episode_metrics(infos: Sequence[Info], frame_dt_s: float = FRAME_DT_S) -> di
         "success": success(infos),
         "following_rate": following_rate(infos),
         "collision_rate": float(crashed(infos)),  # per episode 0 or 1: a suite's mean is the rate
-        "nre": not_reported_error(infos),
-        "dre": drift_rate_error(infos),
-        "adq": absence_detection_quality(infos),
+        **vots_scores(vots_classes(infos)),  # nre, dre, adq
     }

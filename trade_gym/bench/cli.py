@@ -24,13 +24,11 @@ from trade_gym.bench.splits import EVALUATION
 from trade_gym.bench.suites import (BOOL_SWITCHES, EVALUATION_SUITES, SUITE_JOBS, SUITES, RunSpec, Selection,
                                     expand_suite)
 from trade_gym.bench.summary import summarise
-from trade_gym.cli_args import OneLineParser, UsageError
+from trade_gym.cli_args import OneLineParser, UsageError, parse_switch
 from trade_gym.config import PERCEPTION_MODES, POSE_SOURCES, SCENE_NAMES, EnvConfig
 
 PROG = "trade-bench"
 EXIT_USAGE, EXIT_FAILED = 2, 1
-SWITCH_VALUES = {"true": (True,), "on": (True,), "1": (True,), "false": (False,), "off": (False,), "0": (False,),
-                 "both": (False, True)}
 DEFAULT_CUSTOM_JOBS = 1
 REFERENCE_SUITE = "quick"  # the suite the regression reference records
 MIN_STEPS, MIN_CAMERA_PX, MIN_JOBS = 1, 16, 1  # EnvConfig's camera_size floor is 16 px
@@ -87,14 +85,7 @@ def _selection(args: argparse.Namespace) -> Selection:
                 raise UsageError(f"unknown policy {name!r} (choose from {', '.join(POLICY_NAMES)})")
         if "learned" in args.policies and (reason := learned_unavailable_reason()) is not None:
             raise UsageError(f"policy 'learned' is not available: {reason}")
-    switches = []
-    for item in args.ablation:
-        name, _, value = item.partition("=")
-        if name not in BOOL_SWITCHES:
-            raise UsageError(f"--ablation {item!r}: unknown switch {name!r} (choose from {', '.join(BOOL_SWITCHES)})")
-        if value.lower() not in SWITCH_VALUES:
-            raise UsageError(f"--ablation {item!r}: value must be true, false or both")
-        switches.append((name, SWITCH_VALUES[value.lower()]))
+    switches = [parse_switch(item, BOOL_SWITCHES, allow_both=True) for item in args.ablation]
     if args.seeds is not None and not 0 <= args.seeds[0] <= args.seeds[1]:
         raise UsageError(f"--seeds FIRST LAST needs 0 <= FIRST <= LAST, got {args.seeds[0]} {args.seeds[1]}")
     minimums = (("--steps", args.steps, MIN_STEPS), ("--camera-size", args.camera_size, MIN_CAMERA_PX),

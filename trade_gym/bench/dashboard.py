@@ -40,6 +40,14 @@ class ViewBox:
     side_m: float
     side_px: int
 
+    @classmethod
+    def around(cls, xy_m: npt.ArrayLike, margin_m: float, side_px: int) -> ViewBox:
+        """The smallest square holding the points (N, 2+) [m] with `margin_m` on every side."""
+        xy = np.asarray(xy_m, float)[:, :2]
+        lo, hi = xy.min(axis=0) - margin_m, xy.max(axis=0) + margin_m
+        side, centre = float(max(hi - lo)), (lo + hi) / 2.0
+        return cls(float(centre[0] - side / 2), float(centre[1] - side / 2), side, side_px)
+
     def to_px(self, xy_m: npt.ArrayLike) -> npt.NDArray[np.int32]:
         xy = np.atleast_2d(np.asarray(xy_m, float))[:, :2]
         u = (xy[:, 0] - self.x0_m) / self.side_m * self.side_px
@@ -51,11 +59,7 @@ def view_box(world: World, side_px: int) -> ViewBox:
     """The smallest square holding the target's whole route and the drone's start, with a margin."""
     path = world.target.motion.path
     route = np.asarray(path.position_m(np.linspace(0.0, path.length_m, PATH_SAMPLES)))[:, :2]
-    points = np.vstack([route, world.drone_start()[0][None, :2]])
-    lo, hi = points.min(axis=0) - EXTENT_MARGIN_M, points.max(axis=0) + EXTENT_MARGIN_M
-    side = float(max(hi - lo))
-    centre = (lo + hi) / 2.0
-    return ViewBox(float(centre[0] - side / 2), float(centre[1] - side / 2), side, side_px)
+    return ViewBox.around(np.vstack([route, world.drone_start()[0][None, :2]]), EXTENT_MARGIN_M, side_px)
 
 
 def terrain_image(world: World, box: ViewBox) -> Image:

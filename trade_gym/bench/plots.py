@@ -119,9 +119,8 @@ def _draw_terrain(ax: plt.Axes, spec: RunSpec, xy_m: npt.NDArray[np.float64]) ->
     finite = xy_m[np.all(np.isfinite(xy_m), axis=1)]
     if not len(finite):
         return
-    lo, hi = finite.min(axis=0) - TERRAIN_MARGIN_M, finite.max(axis=0) + TERRAIN_MARGIN_M
-    side, centre = float(max(hi - lo)), (lo + hi) / 2.0
-    box = ViewBox(float(centre[0] - side / 2), float(centre[1] - side / 2), side, TERRAIN_IMAGE_PX)
+    box = ViewBox.around(finite, TERRAIN_MARGIN_M, TERRAIN_IMAGE_PX)
+    side = box.side_m
     env = TradeFollowEnv(**(spec.env_kwargs() | {"perception": "oracle", "render_mode": None}))
     try:
         env.reset(seed=spec.seed)

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from trade_gym.bench.runner import trajectory_sha256  # first: imports pybullet without its banner
-from trade_gym.cli_args import OneLineParser, UsageError
+from trade_gym.cli_args import OneLineParser, UsageError, parse_switch
 from trade_gym.perception.trade_stack import STACK_SWITCHES, pipeline_config
 from trade_gym.provenance import cpu_model, git_commit
 from trade_gym.recording.format import SequenceError, json_safe
@@ -31,7 +31,6 @@ PROG = "trade-replay"
 EXIT_USAGE = 2
 ESTIMATES_FILE, RESULTS_FILE, VIDEO_STEM = "estimates.jsonl", "results.json", "video"
 RESULTS_KIND = "trade-replay"
-SWITCH_VALUES = {"true": True, "on": True, "1": True, "false": False, "off": False, "0": False}
 PARTIAL_SUFFIX = ".partial"
 
 
@@ -50,15 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _overrides(items: Seq[str]) -> tuple[tuple[str, bool], ...]:
-    out = []
-    for item in items:
-        name, _, value = item.partition("=")
-        if name not in STACK_SWITCHES:
-            raise UsageError(f"--ablation {item!r}: unknown switch {name!r} (choose from {', '.join(STACK_SWITCHES)})")
-        if value.lower() not in SWITCH_VALUES:
-            raise UsageError(f"--ablation {item!r}: value must be true or false")
-        out.append((name, SWITCH_VALUES[value.lower()]))
-    return tuple(out)
+    return tuple((name, values[0]) for name, values in (parse_switch(item, STACK_SWITCHES) for item in items))
 
 
 def _check_out(out: Path | None) -> Path:
