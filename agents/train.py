@@ -18,6 +18,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from agents.learning_curve import curve_callback
 from agents.obs_flatten import FlatObservation
 from agents.training_env import SceneRandomizedEnv, ZeroYawAction
 from agents.warm_start import WarmStartConfig
@@ -37,7 +38,7 @@ class TrainConfig:
     """Everything that determines a training run; `seed` fixes the env draws, torch and SB3."""
 
     algo: str = "ppo"
-    total_steps: int = 300_000
+    total_steps: int = 1_200_000
     n_envs: int = 2  # SubprocVecEnv workers (one per core)
     seed: int = 0
     scenes: tuple[str, ...] = SCENE_NAMES
@@ -70,7 +71,7 @@ class TrainConfig:
     torch_threads: int = 1
     progress_bar: bool = True
     tensorboard_dir: str | None = None
-    checkpoint_every_steps: int = 0  # save checkpoints/model_<steps>.zip this often (0: never)
+    checkpoint_every_steps: int = 100_000  # save checkpoints/model_<steps>.zip this often (0: never)
     verbose: int = 0  # SB3 logging to stdout (1: rollout/train statistics every update)
 
     def __post_init__(self) -> None:
@@ -205,12 +206,13 @@ def train(config: TrainConfig, out_dir: str | Path) -> dict:
             clone = warm_start(model, config)
             # the clone alone, for comparison with the fine-tuned policy
             clone["onnx_sha256"] = export_onnx(model, out / "policy_warm_start.onnx")
-        callback = None
-        if config.checkpoint_every_steps:
-            from stable_baselines3.common.callbacks import CheckpointCallback
+        from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
 
+        callbacks = [curve_callback(out)]  # learning_curve.csv: every training episode's return and distance
+        if config.checkpoint_every_steps:
             every_call = max(config.checkpoint_every_steps // config.n_envs, 1)  # one call steps every env
-            callback = CheckpointCallback(every_call, str(out / "checkpoints"), name_prefix="model")
+            callbacks.append(CheckpointCallback(every_call, str(out / "checkpoints"), name_prefix="model"))
+        callback = CallbackList(callbacks)
         _learn(model, config, callback)
     finally:
         vec_env.close()

@@ -47,7 +47,9 @@ class SceneRandomizedEnv(gym.Env):
         return obs, {**info, "scene": self.scene, "world_seed": world_seed}
 
     def step(self, action):
-        return self._envs[self.scene].step(action)
+        obs, reward, terminated, truncated, info = self._envs[self.scene].step(action)
+        info["scene"] = self.scene  # for the learning curve's per-scene rows
+        return obs, reward, terminated, truncated, info
 
     def close(self) -> None:
         for env in self._envs.values():
