@@ -15,7 +15,7 @@ import pytest
 from trade_gym.bench import cli, failures, plots, runner
 from trade_gym.bench.plots import nanmean_ragged
 from trade_gym.bench.policies import HoverPolicy, available_policies, learned_unavailable_reason, make_policy
-from trade_gym.bench.report import render_markdown, table1_pivot
+from trade_gym.bench.report import render_markdown, table1_pivot, tracking_pivot
 from trade_gym.bench.results import deterministic_part, load_schema, to_json_safe
 from trade_gym.bench.suites import SUITES, RunSpec, Selection, expand_suite
 from trade_gym.bench.summary import metric_stats, pooled_rmse, summarise
@@ -148,14 +148,14 @@ def test_nanmean_ragged_averages_runs_of_different_lengths():
 
 def _record(scene, pose, tf, gm, rmse):
     return {"scene": scene, "pose_source": pose, "switches": {"temporal_fusion": tf, "ground_mask": gm},
-            "pooled_ground_depth_rmse_m": rmse}
+            "pooled_ground_depth_rmse_m": rmse, "pooled_ground_depth_frames": 100 + 10 * tf + gm}
 
 
 def test_table1_pivot_cells_show_gt_then_vio_in_brackets():
     records = [_record("desert", p, tf, gm, rmse=(1.0 if p == "gt" else 2.0) + tf + 10 * gm)
                for p in ("gt", "vio") for tf in (False, True) for gm in (False, True)]
     rows = table1_pivot(records)
-    assert rows[2] == "| ✗ | ✗ | 1 (2) |" and rows[5] == "| ✓ | ✓ | 12 (13) |"
+    assert rows[2] == "| ✗ | ✗ | 1 [100] (2 [100]) |" and rows[5] == "| ✓ | ✓ | 12 [111] (13 [111]) |"
 
 
 def test_run_spec_exception_recorded_as_one_line_error(monkeypatch):
@@ -301,7 +301,7 @@ def test_latency_suite_sweeps_five_latencies_per_scene_and_follower_on_developme
 
 def _latency_result(policy: str, latency_ms: float, error_m: float, tracked: float) -> runner.RunResult:
     metrics = dict.fromkeys(METRIC_NAMES, 0.0) | {
-        "steps": 450, "tracked_fraction": tracked, "mean_horizontal_error_m": error_m, "decoy_switches": 0,
+        "steps": 450, "tracked_fraction": tracked, "visible_fraction": 1.0, "mean_horizontal_error_m": error_m, "decoy_switches": 0,
         "ground_depth_frames": 0, "target_depth_frames": 0, "crashed": False}
     spec = RunSpec("latency", "latency", "desert", policy, "trade", "gt", 0, 450, 256,
                    (("perception_latency_ms", latency_ms),), (("perception_latency", "fixed"),))
@@ -313,9 +313,9 @@ def test_latency_report_pivots_error_and_tracked_by_latency_and_plots_them(tmp_p
                _latency_result("learned", 0.0, 0.4, 0.95), _latency_result("learned", 100.0, 1.25, 0.3)]
     md = render_markdown(summarise(results), {"commit": "c", "date_utc": "d", "cpu": "x", "cores": 1,
                                               "renderer": "r", "runs": 4, "wall_s": 1.0, "jobs": 1}, {}, [], [])
-    assert "| scene | follower | 0 ms: error [m] / tracked | 100 ms: error [m] / tracked |" in md
-    assert "| desert | scripted | 0.5 / 0.9 | 0.75 / 0.6 |" in md
-    assert "| desert | learned | 0.4 / 0.95 | 1.25 / 0.3 |" in md
+    assert "| scene | follower | 0 ms: error [m] / tracked (visible) | 100 ms: error [m] / tracked (visible) |" in md
+    assert "| desert | scripted | 0.5 / 0.9 (1) | 0.75 / 0.6 (1) |" in md
+    assert "| desert | learned | 0.4 / 0.95 (1) | 1.25 / 0.3 (1) |" in md
     assert "scripted trade gt perception_latency_ms=100" in md  # the per-configuration table's label
     path = plots.plot_latency(results, "t", tmp_path / "latency.png")
     assert path is not None and path.stat().st_size > 0
@@ -334,3 +334,13 @@ def test_paths_plot_draws_the_runs_world_under_the_paths():
         assert np.ptp(np.asarray(image.get_array())) > 0  # shading and a building, not a flat fill
     finally:
         plots.plt.close(fig)
+
+
+def test_tracking_pivot_puts_the_visible_fraction_beside_the_tracking_scores():
+    stats = lambda v: {"mean": v, "std": float("nan"), "n": 1}  # noqa: E731
+    record = {"scene": "city", "perception": "trade", "pose_source": "vio", "switches": {},
+              "decoy_switches_total": 2,
+              "metrics": {"visible_fraction": stats(0.8), "tracked_fraction": stats(0.9), "success_auc": stats(0.7)}}
+    rows = tracking_pivot([record])
+    assert rows[0] == "| scene | trade (vio) switches | trade (vio) visible | trade (vio) tracked | trade (vio) AUC |"
+    assert rows[2] == "| city | 2 | 0.8 | 0.9 | 0.7 |"

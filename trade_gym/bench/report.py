@@ -29,22 +29,31 @@ def mean_pm(stats: dict[str, float], digits: int = 3) -> str:
     return fmt(stats["mean"], digits) + (f" ± {fmt(std, digits)}" if math.isfinite(std) else "")
 
 
+def with_frames(rmse: float | None, frames: int) -> str:
+    """A pooled depth RMSE with the number of frames it pools, 'rmse [frames]'."""
+    return f"{fmt(rmse)} [{frames}]"
+
+
 def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
     return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + ["| " + " | ".join(r) + " |" for r in rows]
 
 
 def generic_table(records: Sequence[Record]) -> list[str]:
     header = ["scene", "configuration", "runs", "steps", "visible", "tracked", "AUC", "P@20px", "lost max [s]",
-              "switches", "ground RMSE [m]", "target RMSE [m]", "horiz. error [m]", "crashes"]
+              "switches", "ground RMSE [m] [frames]", "target RMSE [m] [frames]", "horiz. error [m]", "crashes"]
     rows = []
     for r in records:
         m = r["metrics"]
         rows.append([r["scene"], config_label(r), f"{r['n_runs'] - r['n_failed']}/{r['n_runs']}",
                      mean_pm(m["steps"], 4), mean_pm(m["visible_fraction"]), mean_pm(m["tracked_fraction"]),
                      mean_pm(m["success_auc"]), mean_pm(m["precision_20px"]), fmt(m["longest_lost_streak_s"]["max"]),
-                     str(r["decoy_switches_total"]), fmt(r["pooled_ground_depth_rmse_m"]),
-                     fmt(r["pooled_target_depth_rmse_m"]), mean_pm(m["mean_horizontal_error_m"]), str(r["crashes"])])
+                     str(r["decoy_switches_total"]), _depth(r, "ground"), _depth(r, "target"),
+                     mean_pm(m["mean_horizontal_error_m"]), str(r["crashes"])])
     return table(header, rows)
+
+
+def _depth(record: Record, kind: str) -> str:
+    return with_frames(record[f"pooled_{kind}_depth_rmse_m"], record[f"pooled_{kind}_depth_frames"])
 
 
 # The scorecard's columns: EVT-Bench style per episode, VOTS style per frame (`trade_gym.metrics`).
@@ -73,7 +82,7 @@ def _find(records: Sequence[Record], **match: Any) -> Record | None:
 
 
 def table1_pivot(records: Sequence[Record]) -> list[str]:
-    """Pooled ground-depth RMSE [m]: rows temporal fusion x ground mask, cells 'gt (vio)' per scene."""
+    """Pooled ground-depth RMSE [m] [frames]: rows temporal fusion x ground mask, cells 'gt (vio)' per scene."""
     scenes = _scenes(records)
     rows = []
     for tf in (False, True):
@@ -82,34 +91,37 @@ def table1_pivot(records: Sequence[Record]) -> list[str]:
             for scene in scenes:
                 gt, vio = (_find(records, scene=scene, pose_source=p, temporal_fusion=tf, ground_mask=gm)
                            for p in ("gt", "vio"))
-                cell = fmt(gt["pooled_ground_depth_rmse_m"]) if gt else MISSING
-                cells.append(cell + (f" ({fmt(vio['pooled_ground_depth_rmse_m'])})" if vio else ""))
+                cell = _depth(gt, "ground") if gt else MISSING
+                cells.append(cell + (f" ({_depth(vio, 'ground')})" if vio else ""))
             rows.append(["✓" if tf else "✗", "✓" if gm else "✗"] + cells)
     return table(["temporal fusion", "ground mask"] + scenes, rows)
 
 
 def table2_pivot(records: Sequence[Record]) -> list[str]:
-    """Pooled target-depth RMSE [m] of single-image depth, RANSAC off/on per scene."""
+    """Pooled target-depth RMSE [m] [frames] of single-image depth, RANSAC off/on per scene."""
     scenes = _scenes(records)
     rows = []
     for ransac in (False, True):
         cells = [_find(records, scene=s, depth_only_ransac=ransac) for s in scenes]
-        rmses = [fmt(c["pooled_target_depth_rmse_m"]) if c else MISSING for c in cells]
+        rmses = [_depth(c, "target") if c else MISSING for c in cells]
         rows.append(["✓" if ransac else "✗"] + rmses)
     return table(["RANSAC"] + scenes, rows)
 
 
 def tracking_pivot(records: Sequence[Record]) -> list[str]:
-    """Per scene and perception: decoy switches (total), tracked fraction and success AUC (mean ± std)."""
+    """Per scene and perception: decoy switches (total), visible and tracked fraction and success AUC (mean ±
+    std); tracking scores are over the visible frames, so the visible fraction says how many there were."""
     columns = list(dict.fromkeys((r["perception"], r["pose_source"]) for r in records))
-    header = ["scene"] + [f"{p} ({pose}) {what}" for p, pose in columns for what in ("switches", "tracked", "AUC")]
+    header = ["scene"] + [f"{p} ({pose}) {what}" for p, pose in columns
+                          for what in ("switches", "visible", "tracked", "AUC")]
     rows = []
     for scene in _scenes(records):
         row = [scene]
         for perception, pose in columns:
             r = _find(records, scene=scene, perception=perception, pose_source=pose)
-            row += [str(r["decoy_switches_total"]), mean_pm(r["metrics"]["tracked_fraction"]),
-                    mean_pm(r["metrics"]["success_auc"])] if r else [MISSING] * 3
+            row += [str(r["decoy_switches_total"]), mean_pm(r["metrics"]["visible_fraction"]),
+                    mean_pm(r["metrics"]["tracked_fraction"]), mean_pm(r["metrics"]["success_auc"])] if r \
+                else [MISSING] * 4
         rows.append(row)
     return table(header, rows)
 
@@ -134,13 +146,13 @@ def unseen_pivot(records: Sequence[Record]) -> list[str]:
     """Per scene and configuration: pooled ground-depth RMSE with its frame count, the per-world median,
     90th percentile and worst RMSE, tracking, and how many worlds failed; then each failed world's cause."""
     header = ["scene", "configuration", "worlds", "ground RMSE pooled [m]", "frames", "per-world median / p90 / "
-              "worst [m]", "tracked (mean, median)", "switches", "failed worlds"]
+              "worst [m]", "visible (mean)", "tracked (mean, median)", "switches", "failed worlds"]
     rows, failed = [], []
     for r in records:
         m, rmse = r["metrics"], r["metrics"]["ground_depth_rmse_m"]
         rows.append([r["scene"], config_label(r), str(r["n_runs"] - r["n_failed"]),
                      fmt(r["pooled_ground_depth_rmse_m"]), str(r["pooled_ground_depth_frames"]),
-                     " / ".join(fmt(rmse[k]) for k in ("median", "p90", "max")),
+                     " / ".join(fmt(rmse[k]) for k in ("median", "p90", "max")), fmt(m["visible_fraction"]["mean"]),
                      f"{fmt(m['tracked_fraction']['mean'])}, {fmt(m['tracked_fraction']['median'])}",
                      str(r["decoy_switches_total"]), f"{len(r['failed_runs'])} of {r['n_runs']}"])
         failed += [f"- {r['scene']}, {config_label(r)}, world {f['seed']}: {f['cause']}" for f in r["failed_runs"]]
@@ -155,7 +167,8 @@ LATENCY_KEY = "perception_latency_ms"  # the latency suite's swept env keyword
 
 
 def latency_pivot(records: Sequence[Record]) -> list[str]:
-    """Per scene and follower: mean horizontal following error [m] / tracked fraction at each latency [ms]."""
+    """Per scene and follower: mean horizontal following error [m] / tracked fraction (visible fraction) at each
+    latency [ms]."""
     latencies = sorted(dict.fromkeys(r["switches"][LATENCY_KEY] for r in records))
     rows = []
     for scene in _scenes(records):
@@ -164,10 +177,10 @@ def latency_pivot(records: Sequence[Record]) -> list[str]:
             for latency in latencies:
                 r = _find(records, scene=scene, policy=policy, **{LATENCY_KEY: latency})
                 m = r["metrics"] if r else None
-                row.append(f"{mean_pm(m['mean_horizontal_error_m'], 2)} / {mean_pm(m['tracked_fraction'])}"
-                           if m else MISSING)
+                row.append(f"{mean_pm(m['mean_horizontal_error_m'], 2)} / {mean_pm(m['tracked_fraction'])} "
+                           f"({mean_pm(m['visible_fraction'])})" if m else MISSING)
             rows.append(row)
-    return table(["scene", "follower"] + [f"{fmt(v)} ms: error [m] / tracked" for v in latencies], rows)
+    return table(["scene", "follower"] + [f"{fmt(v)} ms: error [m] / tracked (visible)" for v in latencies], rows)
 
 
 PIVOTS = {"table1": table1_pivot, "table2": table2_pivot, "tracking": tracking_pivot, "follow": follow_pivot,
@@ -181,7 +194,8 @@ def render_markdown(summary: Sequence[Record], meta: Record, titles: dict[str, s
              f"commit `{meta['commit']}`, {meta['date_utc']}, {meta['cpu']} ({meta['cores']} cores), "
              f"renderer {meta['renderer']}, {meta['runs']} runs in {meta['wall_s']:.0f} s with {meta['jobs']} jobs.",
              "", "Means ± sample std over seeds; depth RMSE pooled over all frames of all runs; "
-             "tracking scores over frames with the target visible; `–` = undefined (no such frame).", ""]
+             "[n] after a depth RMSE: the frames it pools; tracking scores over frames with the target visible "
+             "(the visible fraction beside them); `–` = undefined (no such frame).", ""]
     for group in dict.fromkeys(r["group"] for r in summary):
         records = [r for r in summary if r["group"] == group]
         lines += [f"## {titles.get(group, group)}", ""]
