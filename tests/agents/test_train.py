@@ -156,3 +156,33 @@ def test_command_line_from_scratch_and_overrides_apply_on_the_hyperparameter_fil
     with pytest.raises(ValueError, match="contradicts"):
         config_from_args(_parser().parse_args(["--out", "x", "--algo", "sac",
                                                "--hyperparams", str(hyperparams_path("ppo"))]))
+
+
+def test_learning_curve_logs_every_finished_training_episode_and_plots(tiny_run, tmp_path):
+    from agents.learning_curve import CURVE_FILE, moving_mean, plot_curves, read_curve
+
+    out, record = tiny_run
+    curve = read_curve(out / CURVE_FILE)
+    episode_steps = round(EPISODE_S * 30)
+    assert len(curve["steps"]) >= record["steps"] // episode_steps - 1  # every finished episode, one row each
+    assert np.all(np.diff(curve["steps"]) >= 0) and curve["steps"][-1] <= record["steps"]
+    assert np.all(curve["episode_steps"] <= episode_steps) and np.all(curve["mean_horizontal_distance_m"] > 0)
+    assert np.all(np.isfinite(curve["episode_return"]))
+    assert np.allclose(moving_mean(np.array([1.0, 3.0, 5.0]), 2), [1.0, 2.0, 4.0])
+    plot_curves({"tiny": out / CURVE_FILE}, tmp_path / "curve.png", reference={"scripted": 1.0})
+    assert (tmp_path / "curve.png").stat().st_size > 0
+
+
+def test_evaluate_flies_model_and_scripted_on_the_same_worlds_and_refuses_evaluation_worlds(tiny_run):
+    from agents.evaluate import evaluate
+    from trade_gym.bench.splits import EvaluationWorldError
+
+    out, record = tiny_run
+    result = evaluate(out / "policy.onnx", record["onnx_sha256"], [EASY_SCENE], [0, 1], 30, dict(EASY_ENV))
+    scene = result["scenes"][EASY_SCENE]
+    assert set(scene["runs"]) == {"scripted", "learned"} and all(len(r) == 2 for r in scene["runs"].values())
+    assert all(r["steps"] == 30 for rs in scene["runs"].values() for r in rs)
+    assert scene["distance_ratio_learned_to_scripted"] == pytest.approx(
+        scene["mean"]["learned"]["mean_horizontal_distance_m"] / scene["mean"]["scripted"]["mean_horizontal_distance_m"])
+    with pytest.raises(EvaluationWorldError, match=str(EVALUATION.first)):
+        evaluate(out / "policy.onnx", record["onnx_sha256"], [EASY_SCENE], [EVALUATION.first], 30, dict(EASY_ENV))
