@@ -127,19 +127,21 @@ def tracking_pivot(records: Sequence[Record]) -> list[str]:
 
 
 def follow_pivot(records: Sequence[Record]) -> list[str]:
-    """Per follower (and perception): visible fraction and horizontal following error per scene."""
+    """Per follower (perception, and pose when the group has several): horizontal following error, visible and
+    tracked fraction per scene."""
     scenes = _scenes(records)
-    configs = list(dict.fromkeys((r["policy"], r["perception"]) for r in records))
+    configs = list(dict.fromkeys((r["policy"], r["perception"], r["pose_source"]) for r in records))
+    several_poses = len({pose for _, _, pose in configs}) > 1
     rows = []
-    for policy, perception in configs:
-        row = [f"{policy} ({perception})"]
+    for policy, perception, pose in configs:
+        row = [f"{policy} ({perception}{', ' + pose if several_poses else ''})"]
         for scene in scenes:
-            r = _find(records, scene=scene, policy=policy, perception=perception)
+            r = _find(records, scene=scene, policy=policy, perception=perception, pose_source=pose)
             m = r["metrics"] if r else None
-            row.append(f"{mean_pm(m['visible_fraction'])} / {mean_pm(m['mean_horizontal_error_m'], 2)}"
-                       if m else MISSING)
+            row.append(f"{mean_pm(m['mean_horizontal_error_m'], 2)} / {mean_pm(m['visible_fraction'])} / "
+                       f"{mean_pm(m['tracked_fraction'])}" if m else MISSING)
         rows.append(row)
-    return table(["follower"] + [f"{s}: visible / error [m]" for s in scenes], rows)
+    return table(["follower"] + [f"{s}: error [m] / visible / tracked" for s in scenes], rows)
 
 
 def unseen_pivot(records: Sequence[Record]) -> list[str]:

@@ -199,6 +199,11 @@ def _unseen_groups(steps: int, camera_size: int, name: str = "unseen", worlds: t
                   steps, camera_size, (), UNSEEN_PROTOCOL),
         GroupSpec(name, "unseen", title, ALL_SCENES, ("scripted",), ("dcf",), ("vio",), worlds,
                   steps, camera_size, (), UNSEEN_PROTOCOL),
+        # the followers compared on the same worlds (the learned follower's model card); its scripted runs are
+        # the first group's full TRADE runs, flown once (`cli.run_once_each`)
+        GroupSpec(f"{name}_follow", "follow", f"Followers on {which} worlds: scripted and learned, full TRADE, gt "
+                  "and vio pose", ALL_SCENES, ("scripted", "learned"), ("trade",), ("gt", "vio"), worlds, steps,
+                  camera_size, (), UNSEEN_PROTOCOL),
         GroupSpec(f"{name}_table1", "table1", f"Table 1 on the first 5 {which} worlds: ground-depth RMSE [m], "
                   "temporal fusion x ground mask, gt (vio) pose", ALL_SCENES, ("scripted",), ("trade",),
                   ("gt", "vio"), ablation_worlds, steps, camera_size,
