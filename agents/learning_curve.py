@@ -93,3 +93,21 @@ def plot_curves(runs: dict[str, str | Path], out_png: str | Path, reference: dic
     fig.tight_layout()
     fig.savefig(out_png, dpi=110)
     plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """`python -m agents.learning_curve RUN_DIR... --out curve.png [--scripted-m D]`: plot runs' curves."""
+    import argparse
+
+    p = argparse.ArgumentParser(description="Plot the learning curves of agents.train runs.")
+    p.add_argument("runs", nargs="+", type=Path, help="output folders of agents.train (holding learning_curve.csv)")
+    p.add_argument("--out", type=Path, required=True, help="PNG to write")
+    p.add_argument("--scripted-m", type=float, default=None,
+                   help="the scripted follower's mean horizontal distance [m], drawn as a reference line")
+    args = p.parse_args(argv)
+    reference = {"scripted follower": args.scripted_m} if args.scripted_m is not None else None
+    plot_curves({run.name: run / CURVE_FILE for run in args.runs}, args.out, reference)
+
+
+if __name__ == "__main__":
+    main()
