@@ -171,13 +171,12 @@ class World:
         return self._poses.pose(v, t_s)
 
     def target_velocity_mps(self, t_s: float) -> FloatArray:
-        """(3,) world velocity [m/s]: v_xy = speed * unit tangent along the path, v_z = grad h . v_xy;
-        zero before the target's delay and after its stop."""
-        m, t = self.target.motion, float(t_s)
-        if not m.is_moving or t < m.delay_s or t >= m.stop_time_s:
+        """(3,) world velocity [m/s]: v_xy the target motion's (speed * unit tangent along the path while it does not
+        swerve), v_z = grad h . v_xy; zero while it stands (before its delay, at a stop, after its stop)."""
+        planar = self.target.motion.planar_velocity_at(float(t_s))
+        if planar is None:
             return np.zeros(3)
-        x, y, tx, ty = m.path.point_at(m.distance_m(t))
-        vx, vy = m.speed_mps * tx, m.speed_mps * ty
+        x, y, vx, vy = planar
         gx, gy = self.terrain.gradient_at(x, y)
         return np.array((vx, vy, gx * vx + gy * vy))
 
