@@ -57,7 +57,8 @@ class VehiclePoses:
     `place_bodies()` moves their pybullet bodies there. Vehicles carry no collision shape, so only
     rendering needs the bodies placed, and a step that does not render skips it. `pose(v, t)` returns
     the cached arrays when t is that time (or v is parked) and computes the same function otherwise, so
-    the result never depends on whether `update(t)` ran.
+    the result never depends on whether `update(t)` ran. (An evasive target's motion is the one function that
+    also depends on the drone: `World.update` advances it first; see `trade_gym.sim.evasive`.)
     """
 
     def __init__(self, client_id: int, terrain: Heightfield, vehicles: tuple[Vehicle, ...]) -> None:
