@@ -15,6 +15,7 @@ from trade_gym.reward import RewardConfig
 from trade_gym.sim.pose_source import VioConfig
 from trade_gym.sim.quadrotor import QuadrotorConfig
 from trade_gym.sim.scenes import DECOY_TIERS
+from trade_gym.sim.target_motion import TARGET_MOTIONS
 
 PERCEPTION_MODES = ("trade", "dcf", "oracle")
 POSE_SOURCES = ("gt", "vio")
@@ -65,6 +66,9 @@ class EnvConfig:
     # Decoy difficulty tier: "ambiguous" (the paper's scenes: identical decoys crossing, overtaking, parked beside
     # the path), "parked" (only parked ones never in view with the target), "none" (`trade_gym.sim.world.DecoyTier`)
     decoys: str = "ambiguous"
+    # How the target drives its route: "cruise" (constant speed), "stop_and_go" (stops and speed changes drawn per
+    # reset), "evasive" (faster and swerving while the drone is overhead) (`trade_gym.sim.target_motion.TargetMotion`)
+    target_motion: str = "cruise"
     # Oracle noise model (perception="oracle"): oracle_<name> is OracleConfig's <name> (`self.oracle`), with its
     # defaults (fitted to full TRADE's closed-loop errors on training worlds; see OracleConfig).
     oracle_box_sigma_px: float = OracleConfig.box_sigma_px  # box jitter per x, y, w, h [px]
@@ -95,6 +99,7 @@ class EnvConfig:
         check_choice("perception", self.perception, PERCEPTION_MODES)
         check_choice("pose_source", self.pose_source, POSE_SOURCES)
         check_choice("decoys", self.decoys, DECOY_TIERS)
+        check_choice("target_motion", self.target_motion, TARGET_MOTIONS)
         check_choice("render_mode", self.render_mode, RENDER_MODES)
         _check_latency(self.perception_latency, self.perception_latency_ms)
         require(is_int_at_least(self.camera_size, MIN_CAMERA_SIZE_PX, numpy_ints=False), "camera_size",

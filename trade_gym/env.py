@@ -18,7 +18,7 @@ import numpy as np
 import pybullet as p
 
 from trade.geometry import Pose
-from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, ActionScale, action_space
+from trade_gym.action import ACTION_DIM, ActionScale, action_space, clip_action
 from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.faults import SensorFilter
@@ -33,7 +33,7 @@ from trade_gym.sim.camera import Camera, CameraConfig, CameraFrame
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import make_pose_source
 from trade_gym.sim.quadrotor import Quadrotor
-from trade_gym.sim.world import DecoyTier, World, build_world
+from trade_gym.sim.world import DecoyTier, TargetMotion, World, build_world
 
 GRAVITY_MPS2 = 9.81
 GROUND_RAY_RANGE_M = 1000.0  # rays for the ground-depth truth reach this far beyond the drone's height [m]
@@ -95,6 +95,7 @@ class TradeFollowEnv(gym.Env):
     `target_position_m`; `horizontal_distance_m`; `decoy_bboxes`; `reward_<term>`. The env computes them all
     (`trade_gym.scoring`; perception sees sensors only, the oracle truth through providers given at construction);
     `ground_depth_est`, the paper's Table 1 quantity, is the estimated ground's depth on the true box centre's ray.
+    The reset's `info` also holds `target_motion`: the mode and what was drawn for it (`TargetMotion`).
 
     ## Rewards
     The task in its own units, from ground truth; the terms sum to the reward and each is in
@@ -118,7 +119,8 @@ class TradeFollowEnv(gym.Env):
     All fields of `trade_gym.config.EnvConfig`, e.g. `scene`, `perception`, `pose_source`,
     `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches,
     `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0), and
-    the components' configs `reward=`, `quadrotor=` and `vio=` (each the config or a mapping of its fields), `decoys`.
+    the components' configs `reward=`, `quadrotor=` and `vio=` (each the config or a mapping of its fields), `decoys`,
+    `target_motion`.
 
     ## Version History
     - v0: initial release.
@@ -134,6 +136,8 @@ class TradeFollowEnv(gym.Env):
     - v0, issue 17: `drone_vel_mps` comes from the pose source (with `vio`: rotated by the yaw drift, plus a
       bounded velocity error, `VioConfig`), no longer from the simulator's true state.
     - v0, issue 19: `decoys=` ("ambiguous", the default and as before; "parked"; "none"), see `DecoyTier`.
+    - v0, issue 19: `target_motion=` ("cruise", the default and as before; "stop_and_go"; "evasive"), see
+      `TargetMotion`; the reset's `info["target_motion"]` holds the mode and what was drawn for it.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -177,7 +181,8 @@ class TradeFollowEnv(gym.Env):
         rng = self.np_random
         world_rng = rng if self.config.world_seed is None else np.random.default_rng(self.config.world_seed)
         self.world = build_world(cid, self.config.scene, world_rng, self.config.target_speed_mps,
-                                 DecoyTier(self.config.decoys, self.config.camera_fov_deg))
+                                 DecoyTier(self.config.decoys, self.config.camera_fov_deg),
+                                 TargetMotion(self.config.target_motion, self.config.camera_fov_deg))
         start_position, start_yaw = self.world.drone_start()
         self.quadrotor.spawn(start_position, start_yaw)
         self._state = self.quadrotor.read_state()
@@ -202,14 +207,15 @@ class TradeFollowEnv(gym.Env):
         held = self._perceive(sensors, truth, lambda: self.perception.reset(sensors, init_box, rng))
         visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
         inputs = reward_inputs(truth, self.world, self._state.position_m, visible, (), False)
-        return self._observe(held.estimate, sensors), self._info(truth, held, inputs, terms=None)
+        info = self._info(truth, held, inputs, terms=None) | {"target_motion": self.world.target_motion_info}
+        return self._observe(held.estimate, sensors), info
 
     def step(self, action):
         if self._client is None:
             raise RuntimeError("step() called after close(); create a new env")
         if self._needs_reset:
             raise RuntimeError("step() called before reset()")
-        action = self._validate_action(action)
+        action = clip_action(action)
         crashed = self._advance(action)
         sensors, truth = self._sense()
         held = self._perceive(sensors, truth, lambda: self.perception.step(sensors))
@@ -321,17 +327,6 @@ class TradeFollowEnv(gym.Env):
             raise RuntimeError("reset() called after close(); create a new env")
         return self._client
 
-    def _validate_action(self, action) -> list[float]:
-        """The action as ACTION_DIM floats clipped to [-1, 1]; ValueError for a wrong shape or a
-        non-finite value. (Plain floats: the step's scalar maths is cheaper on them than on arrays.)"""
-        a = np.asarray(action, dtype=np.float64)
-        if a.shape != (ACTION_DIM,):
-            raise ValueError(f"action must have shape ({ACTION_DIM},), got shape {a.shape}: {action!r}")
-        values = a.tolist()
-        if not all(math.isfinite(v) for v in values):
-            raise ValueError(f"action of shape ({ACTION_DIM},) must be finite, got {values}")
-        return [min(max(v, ACTION_LOW), ACTION_HIGH) for v in values]
-
     def _advance(self, action: list[float]) -> bool:
         """Run one camera frame of physics under the action; True if the drone crashed."""
         fwd, left, up, yaw_rate = (a * s for a, s in zip(action, self._action_scale))
@@ -342,7 +337,7 @@ class TradeFollowEnv(gym.Env):
         self._t_s = quadrotor.fly(self.config.physics_steps_per_frame, dt, self._t_s, self.imu.add_truth)
         self._state = quadrotor.read_state()
         self._distance_flown_m += math.dist(self._state.position_m.tolist(), previous)
-        self.world.update(self._t_s)
+        self.world.update(self._t_s, self._state.position_m)  # an evasive target reacts to the drone
         return quadrotor.collided(self.world.static_body_ids) or self._below_surface()
 
     def _below_surface(self) -> bool:

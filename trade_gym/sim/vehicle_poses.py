@@ -26,7 +26,7 @@ def pose_at(terrain: Heightfield, v: Vehicle, t_s: float) -> Pose12:
     n = (-pitch fwd - roll left, 1) / |.|, x_axis = (fwd, pitch) / |.|, y_axis = n x x_axis, and the
     bottom face's centre on the terrain: centre = (x, y, h(x, y)) + half_z n.
     """
-    x, y, c, s = v.motion.path.point_at(v.motion.distance_m(t_s))  # tangent (c, s) = (cos, sin) heading
+    x, y, c, s = v.motion.planar_pose(t_s)  # heading (c, s) = (cos, sin): the path's tangent unless it swerves
     hx, hy, hz = v.half_extents_m.tolist()
     fx, fy, lx, ly = c * hx, s * hx, -s * hy, c * hy
     h = terrain.height_at
@@ -57,7 +57,8 @@ class VehiclePoses:
     `place_bodies()` moves their pybullet bodies there. Vehicles carry no collision shape, so only
     rendering needs the bodies placed, and a step that does not render skips it. `pose(v, t)` returns
     the cached arrays when t is that time (or v is parked) and computes the same function otherwise, so
-    the result never depends on whether `update(t)` ran.
+    the result never depends on whether `update(t)` ran. (An evasive target's motion is the one function that
+    also depends on the drone: `World.update` advances it first; see `trade_gym.sim.evasive`.)
     """
 
     def __init__(self, client_id: int, terrain: Heightfield, vehicles: tuple[Vehicle, ...]) -> None:

@@ -1,12 +1,14 @@
 """Ground vehicles: box-built car/truck/tank meshes, kinematic motion along a path, terrain-hugging poses.
 
-Owns `VehicleModel`, `VehicleMotion`, `Vehicle`, `terrain_pose` and the visual-only pybullet bodies.
+Owns `VehicleModel`, `VehicleMotion` (and the `Motion` protocol), `Vehicle`, `terrain_pose` and the visual-only
+pybullet bodies.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -17,6 +19,8 @@ from trade_gym.sim.spline import CatmullRomSpline
 from trade_gym.sim.terrain import Heightfield
 
 FloatArray = npt.NDArray[np.float64]
+PlanarPose = tuple[float, float, float, float]  # x, y [m] and the unit heading (cos, sin)
+PlanarVelocity = tuple[float, float, float, float]  # x, y [m] and the world velocity v_x, v_y [m/s]
 
 # Palette texture: one row of solid 4x4-px cells (assets/textures/vehicle_palette.png, see make_assets.py).
 PALETTE_RGB = (
@@ -131,6 +135,37 @@ class VehicleMotion:
             return np.zeros(2)
         return self.speed_mps * self.path.tangent(self.distance_m(t_s))
 
+    def planar_pose(self, t_s: float) -> PlanarPose:
+        """Position on the path at s(t) and the path's unit tangent there (the heading) at scalar t [s]."""
+        return self.path.point_at(self.distance_m(t_s))
+
+    def planar_velocity_at(self, t_s: float) -> PlanarVelocity | None:
+        """(x, y, v_x, v_y) at scalar t [s]: speed times the unit tangent; None while standing."""
+        if not self.is_moving or t_s < self.delay_s or t_s >= self.stop_time_s:
+            return None
+        x, y, tx, ty = self.path.point_at(self.distance_m(t_s))
+        return x, y, self.speed_mps * tx, self.speed_mps * ty
+
+
+class Motion(Protocol):
+    """What poses and ground truth read of a vehicle's motion: `VehicleMotion`, or one of the target's behaviours
+    (`trade_gym.sim.target_motion`). Scalar times [s]; the pose and velocity in the world's x, y."""
+
+    @property
+    def path(self) -> CatmullRomSpline: ...
+
+    @property
+    def is_moving(self) -> bool: ...
+
+    @property
+    def stop_time_s(self) -> float: ...
+
+    def distance_m(self, t_s: float) -> float: ...
+
+    def planar_pose(self, t_s: float) -> PlanarPose: ...
+
+    def planar_velocity_at(self, t_s: float) -> PlanarVelocity | None: ...
+
 
 @dataclass(frozen=True, eq=False)
 class Vehicle:
@@ -139,7 +174,7 @@ class Vehicle:
     kind: str
     body_id: int
     half_extents_m: FloatArray  # (3,) x fwd, y left, z up [m]
-    motion: VehicleMotion
+    motion: Motion
 
 
 def terrain_pose(

@@ -9,6 +9,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -16,6 +17,7 @@ import pybullet as p
 
 from trade_gym.sim import city, desert, mountain
 from trade_gym.sim.bullet_lists import bullet_list
+from trade_gym.sim.evasive import EvasiveMotion
 from trade_gym.sim.layout import SceneLayout, parked
 from trade_gym.sim.meshes import (
     TEXTURE_PERIOD_M, Mesh, building_meshes, create_terrain_visual, placed_meshes, polygon_mesh, rock_mesh,
@@ -23,6 +25,7 @@ from trade_gym.sim.meshes import (
 )
 from trade_gym.sim.roofs import RoofIndex
 from trade_gym.sim.scenes import DECOY_TIERS, SceneSpec, get_scene
+from trade_gym.sim.target_motion import TargetMotion, motion_summary
 from trade_gym.sim.terrain import Heightfield
 from trade_gym.sim.vehicle_poses import VehiclePoses
 from trade_gym.sim.vehicles import Vehicle, VehicleMotion, create_vehicle_body, create_vehicle_shape, vehicle_model
@@ -117,7 +120,8 @@ def _lake_body(cid: int, layout: SceneLayout) -> int:
 
 
 class World:
-    """One episode's scene; vehicle poses are functions of time only (kinematic, visual-only bodies).
+    """One episode's scene; vehicle poses are functions of time (kinematic, visual-only bodies), an evasive
+    target's also of where the drone was (`update` is told each frame; `trade_gym.sim.evasive`).
 
     Attributes: `spec`, `layout` (everything generated), `terrain` (Heightfield), `target` and `decoys`
     (Vehicle), `body_ids_by_role` (terrain, boulders (all rocks in one body), buildings, road, lake) and
@@ -137,14 +141,20 @@ class World:
         self.body_ids_by_role = MappingProxyType(dict(body_ids_by_role))
         self.static_body_ids: frozenset[int] = frozenset(i for ids in self.body_ids_by_role.values() for i in ids)
         self.roofs = RoofIndex(layout.buildings_lo_m, layout.buildings_hi_m)
+        self._evasive = target.motion if isinstance(target.motion, EvasiveMotion) else None
         self._poses = VehiclePoses(client_id, self.terrain, (target, *decoys))  # places the parked ones
         self.update(0.0)
         self.place_vehicle_bodies()
 
     @property
     def duration_s(self) -> float:
-        """Time the target drives before it stops at its path's end [s]."""
+        """Time the target drives before it stops at its path's end [s] (an evasive one's: at the latest)."""
         return self.target.motion.stop_time_s
+
+    @property
+    def target_motion_info(self) -> dict[str, Any]:
+        """The target's motion mode and what was drawn for it (`target_motion.motion_summary`)."""
+        return motion_summary(self.target.motion)
 
     @property
     def buildings_lo_m(self) -> FloatArray:
@@ -154,9 +164,13 @@ class World:
     def buildings_hi_m(self) -> FloatArray:
         return self.layout.buildings_hi_m
 
-    def update(self, t_s: float) -> None:
+    def update(self, t_s: float, drone_position_m: npt.ArrayLike | None = None) -> None:
         """Pose the target and the moving decoys at time t_s (parked ones never move); once per t_s.
-        Their pybullet bodies move at the next `place_vehicle_bodies` (only rendering sees them)."""
+        Their pybullet bodies move at the next `place_vehicle_bodies` (only rendering sees them). An evasive target
+        first drives on to t_s, then notes the drone's true position at t_s ((3,) world [m]; None: no drone), which
+        it reacts to until the next update; t_s must then not decrease."""
+        if self._evasive is not None:
+            self._evasive.advance(t_s, drone_position_m)
         self._poses.update(t_s)
 
     def place_vehicle_bodies(self) -> None:
@@ -171,13 +185,12 @@ class World:
         return self._poses.pose(v, t_s)
 
     def target_velocity_mps(self, t_s: float) -> FloatArray:
-        """(3,) world velocity [m/s]: v_xy = speed * unit tangent along the path, v_z = grad h . v_xy;
-        zero before the target's delay and after its stop."""
-        m, t = self.target.motion, float(t_s)
-        if not m.is_moving or t < m.delay_s or t >= m.stop_time_s:
+        """(3,) world velocity [m/s]: v_xy the target motion's (speed * unit tangent along the path while it does not
+        swerve), v_z = grad h . v_xy; zero while it stands (before its delay, at a stop, after its stop)."""
+        planar = self.target.motion.planar_velocity_at(float(t_s))
+        if planar is None:
             return np.zeros(3)
-        x, y, tx, ty = m.path.point_at(m.distance_m(t))
-        vx, vy = m.speed_mps * tx, m.speed_mps * ty
+        x, y, vx, vy = planar
         gx, gy = self.terrain.gradient_at(x, y)
         return np.array((vx, vy, gx * vx + gy * vy))
 
@@ -271,9 +284,9 @@ def _park_away(layout: SceneLayout, far_m: float, rng: np.random.Generator) -> t
 
 
 def build_world(client_id: int, scene: str, rng: np.random.Generator, target_speed_mps: float | None = None,
-                decoys: DecoyTier = DecoyTier()) -> World:
+                decoys: DecoyTier = DecoyTier(), target_motion: TargetMotion = TargetMotion()) -> World:
     """Generate and build `scene` in a freshly reset pybullet client (same rng state -> same world); `decoys`
-    picks which of the drawn decoys are built."""
+    picks which of the drawn decoys are built, `target_motion` how the target drives (drawn after the decoys)."""
     spec = get_scene(scene)
     speed = spec.target_speed_mps if target_speed_mps is None else float(target_speed_mps)
     if not np.isfinite(speed) or speed <= 0.0:
@@ -297,6 +310,7 @@ def build_world(client_id: int, scene: str, rng: np.random.Generator, target_spe
         body = create_vehicle_body(client_id, shapes[kind], tex["vehicle_palette"])
         return Vehicle(kind, body, vehicle_model(kind).half_extents_m, motion)
 
-    target = spawn(spec.target_kind, layout.target)
+    target_half = vehicle_model(spec.target_kind).half_extents_m
+    target = spawn(spec.target_kind, target_motion.build(layout, target_half, rng))
     decoys = tuple(spawn(spec.decoy_kind, m) for m in layout.decoys)
     return World(client_id, layout, target, decoys, roles)
