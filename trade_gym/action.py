@@ -7,6 +7,7 @@ limits (`ActionScale.of(QuadrotorConfig)`), DEFAULT_ACTION_SCALE unless `gym.mak
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,3 +44,15 @@ DEFAULT_ACTION_SCALE = ActionScale.of(QuadrotorConfig())
 def action_space(dim: int = ACTION_DIM) -> spaces.Box:
     """Box(ACTION_LOW, ACTION_HIGH, (dim,), float32): the env's (dim = ACTION_DIM) or a follower's first `dim`."""
     return spaces.Box(ACTION_LOW, ACTION_HIGH, (dim,), np.float32)
+
+
+def validate_action(action) -> list[float]:
+    """The action as ACTION_DIM floats clipped to [ACTION_LOW, ACTION_HIGH]; ValueError for a wrong shape or a
+    non-finite value. (Plain floats: the env step's scalar maths is cheaper on them than on arrays.)"""
+    a = np.asarray(action, dtype=np.float64)
+    if a.shape != (ACTION_DIM,):
+        raise ValueError(f"action must have shape ({ACTION_DIM},), got shape {a.shape}: {action!r}")
+    values = a.tolist()
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"action of shape ({ACTION_DIM},) must be finite, got {values}")
+    return [min(max(v, ACTION_LOW), ACTION_HIGH) for v in values]

@@ -18,7 +18,7 @@ import numpy as np
 import pybullet as p
 
 from trade.geometry import Pose
-from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, ActionScale, action_space
+from trade_gym.action import ACTION_DIM, ActionScale, action_space, validate_action
 from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.faults import SensorFilter
@@ -209,7 +209,7 @@ class TradeFollowEnv(gym.Env):
             raise RuntimeError("step() called after close(); create a new env")
         if self._needs_reset:
             raise RuntimeError("step() called before reset()")
-        action = self._validate_action(action)
+        action = validate_action(action)
         crashed = self._advance(action)
         sensors, truth = self._sense()
         held = self._perceive(sensors, truth, lambda: self.perception.step(sensors))
@@ -320,17 +320,6 @@ class TradeFollowEnv(gym.Env):
         if self._client is None:
             raise RuntimeError("reset() called after close(); create a new env")
         return self._client
-
-    def _validate_action(self, action) -> list[float]:
-        """The action as ACTION_DIM floats clipped to [-1, 1]; ValueError for a wrong shape or a
-        non-finite value. (Plain floats: the step's scalar maths is cheaper on them than on arrays.)"""
-        a = np.asarray(action, dtype=np.float64)
-        if a.shape != (ACTION_DIM,):
-            raise ValueError(f"action must have shape ({ACTION_DIM},), got shape {a.shape}: {action!r}")
-        values = a.tolist()
-        if not all(math.isfinite(v) for v in values):
-            raise ValueError(f"action of shape ({ACTION_DIM},) must be finite, got {values}")
-        return [min(max(v, ACTION_LOW), ACTION_HIGH) for v in values]
 
     def _advance(self, action: list[float]) -> bool:
         """Run one camera frame of physics under the action; True if the drone crashed."""
