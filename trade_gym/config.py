@@ -12,6 +12,7 @@ from trade.validation import (check_choice, check_non_negative, check_positive, 
                              nested_config, require)
 from trade_gym.perception.oracle import OracleConfig
 from trade_gym.reward import RewardConfig
+from trade_gym.sim.appearance import APPEARANCE_MODES
 from trade_gym.sim.pose_source import VioConfig
 from trade_gym.sim.quadrotor import QuadrotorConfig
 from trade_gym.sim.scenes import DECOY_TIERS
@@ -69,6 +70,9 @@ class EnvConfig:
     # How the target drives its route: "cruise" (constant speed), "stop_and_go" (stops and speed changes drawn per
     # reset), "evasive" (faster and swerving while the drone is overhead) (`trade_gym.sim.target_motion.TargetMotion`)
     target_motion: str = "cruise"
+    # "fixed" (the paper's scenes as they are) or "randomized": light, ground, vehicle paint, haze and camera effects
+    # drawn per reset from the reset seed, on a stream of their own (`trade_gym.sim.appearance`)
+    appearance: str = "fixed"
     # Oracle noise model (perception="oracle"): oracle_<name> is OracleConfig's <name> (`self.oracle`), with its
     # defaults (fitted to full TRADE's closed-loop errors on training worlds; see OracleConfig).
     oracle_box_sigma_px: float = OracleConfig.box_sigma_px  # box jitter per x, y, w, h [px]
@@ -100,6 +104,7 @@ class EnvConfig:
         check_choice("pose_source", self.pose_source, POSE_SOURCES)
         check_choice("decoys", self.decoys, DECOY_TIERS)
         check_choice("target_motion", self.target_motion, TARGET_MOTIONS)
+        check_choice("appearance", self.appearance, APPEARANCE_MODES)
         check_choice("render_mode", self.render_mode, RENDER_MODES)
         _check_latency(self.perception_latency, self.perception_latency_ms)
         require(is_int_at_least(self.camera_size, MIN_CAMERA_SIZE_PX, numpy_ints=False), "camera_size",

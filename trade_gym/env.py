@@ -29,6 +29,7 @@ from trade_gym.perception.base import PerceptionOutput, SensorFrame
 from trade_gym.perception.factory import make_perception
 from trade_gym.reward import RewardInputs, compute_reward
 from trade_gym.scoring import EnvFrame, ScoredEstimate, env_info, follow_band, reward_inputs, score_estimate
+from trade_gym.sim.appearance import EpisodeLook, appearance_stream
 from trade_gym.sim.camera import Camera, CameraConfig, CameraFrame
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import make_pose_source
@@ -96,6 +97,7 @@ class TradeFollowEnv(gym.Env):
     (`trade_gym.scoring`; perception sees sensors only, the oracle truth through providers given at construction);
     `ground_depth_est`, the paper's Table 1 quantity, is the estimated ground's depth on the true box centre's ray.
     The reset's `info` also holds `target_motion`: the mode and what was drawn for it (`TargetMotion`).
+    The reset's info adds `appearance`: {"mode": "fixed"}, or the values drawn with `appearance="randomized"`.
 
     ## Rewards
     The task in its own units, from ground truth; the terms sum to the reward and each is in
@@ -120,7 +122,7 @@ class TradeFollowEnv(gym.Env):
     `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches,
     `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0), and
     the components' configs `reward=`, `quadrotor=` and `vio=` (each the config or a mapping of its fields), `decoys`,
-    `target_motion`.
+    `target_motion`, `appearance`.
 
     ## Version History
     - v0: initial release.
@@ -138,6 +140,8 @@ class TradeFollowEnv(gym.Env):
     - v0, issue 19: `decoys=` ("ambiguous", the default and as before; "parked"; "none"), see `DecoyTier`.
     - v0, issue 19: `target_motion=` ("cruise", the default and as before; "stop_and_go"; "evasive"), see
       `TargetMotion`; the reset's `info["target_motion"]` holds the mode and what was drawn for it.
+    - v0, issue 19: `appearance=` ("fixed", the default: every image as before; "randomized": light, ground, vehicle
+      paint, haze and camera effects per reset, `trade_gym.sim.appearance`); the reset's info gains `appearance`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -178,11 +182,12 @@ class TradeFollowEnv(gym.Env):
         p.resetSimulation(physicsClientId=cid)
         p.setGravity(0.0, 0.0, -GRAVITY_MPS2, physicsClientId=cid)
         p.setTimeStep(1.0 / PHYSICS_RATE_HZ, physicsClientId=cid)
-        rng = self.np_random
+        rng, look_rng = self.np_random, appearance_stream(self.np_random, self.config.appearance)
         world_rng = rng if self.config.world_seed is None else np.random.default_rng(self.config.world_seed)
         self.world = build_world(cid, self.config.scene, world_rng, self.config.target_speed_mps,
                                  DecoyTier(self.config.decoys, self.config.camera_fov_deg),
                                  TargetMotion(self.config.target_motion, self.config.camera_fov_deg))
+        self._look = EpisodeLook(look_rng, self.world, self.camera)
         start_position, start_yaw = self.world.drone_start()
         self.quadrotor.spawn(start_position, start_yaw)
         self._state = self.quadrotor.read_state()
@@ -208,7 +213,7 @@ class TradeFollowEnv(gym.Env):
         visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
         inputs = reward_inputs(truth, self.world, self._state.position_m, visible, (), False)
         info = self._info(truth, held, inputs, terms=None) | {"target_motion": self.world.target_motion_info}
-        return self._observe(held.estimate, sensors), info
+        return self._observe(held.estimate, sensors), info | self._look.info
 
     def step(self, action):
         if self._client is None:
@@ -272,7 +277,7 @@ class TradeFollowEnv(gym.Env):
 
     @property
     def camera_frame(self) -> CameraFrame | None:
-        """The current frame as rendered (true image, depth and segmentation); None when nothing was rendered."""
+        """The current frame (image as the camera delivered it, true depth and segmentation); None if not rendered."""
         return self._last_frame
 
     @property
@@ -372,7 +377,7 @@ class TradeFollowEnv(gym.Env):
         self._T_world_cam_true = T_world_cam
         if self.config.needs_rendering:
             self.world.place_vehicle_bodies()
-            frame = self.camera.render(T_world_cam)
+            frame = self._look.render(T_world_cam, self._state)
         else:
             frame = None
         self._last_frame = frame
