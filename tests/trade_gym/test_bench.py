@@ -344,3 +344,49 @@ def test_tracking_pivot_puts_the_visible_fraction_beside_the_tracking_scores():
     rows = tracking_pivot([record])
     assert rows[0] == "| scene | trade (vio) switches | trade (vio) visible | trade (vio) tracked | trade (vio) AUC |"
     assert rows[2] == "| city | 2 | 0.8 | 0.9 | 0.7 |"
+
+
+def test_breadth_suite_is_every_tier_motion_appearance_follower_and_perception_on_evaluation_worlds():
+    from trade_gym.bench.splits import EVALUATION
+    from trade_gym.bench.suites import BREADTH_TIERS
+
+    runs = expand_suite("breadth", Selection(), ALL)
+    assert len(runs) == 3 * 3 * 2 * 2 * 3 * 2  # tiers x scenes x followers x perceptions x motions x appearances
+    assert {r.switch_value("decoys") for r in runs} == set(BREADTH_TIERS)
+    assert {r.switch_value("target_motion") for r in runs} == {"cruise", "stop_and_go", "evasive"}
+    assert {r.switch_value("appearance") for r in runs} == {"fixed", "randomized"}
+    assert {(r.policy, r.perception) for r in runs} == {(p, q) for p in ("scripted", "learned") for q in ("trade", "dcf")}
+    assert all(r.world_seed in EVALUATION for r in runs)
+    assert "breadth_parked/city/learned/dcf/vio/target_motion=evasive,appearance=randomized/seed5000" in \
+        {r.run_id for r in runs}
+    cli.validate_runs(runs)
+    cli.check_worlds("breadth", runs)
+    with pytest.raises(cli.UsageError):  # its evaluation worlds belong to evaluation suites only
+        cli.check_worlds(None, runs[:1])
+
+
+def _breadth_result(tier: str, policy: str, perception: str, motion: str, success: bool) -> runner.RunResult:
+    metrics = dict.fromkeys(METRIC_NAMES, 0.0) | {
+        "steps": 450, "success": success, "following_rate": 0.95 if success else 0.2, "collision_rate": 0.0,
+        "ground_depth_frames": 0, "target_depth_frames": 0, "decoy_switches": 0, "crashed": False}
+    spec = RunSpec(f"breadth_{tier}", "breadth", "desert", policy, perception, "vio", 5000, 450, 256,
+                   (("target_motion", motion), ("appearance", "fixed")), (("decoys", tier),))
+    return runner.RunResult(spec, metrics, runner.RunTiming(1.0, 0.1, 0.9, 20.0), None)
+
+
+def test_breadth_report_gives_success_per_tier_and_motion_and_plots_it(tmp_path):
+    results = [_breadth_result(tier, "scripted", perception, motion, success)
+               for tier, perception, motion, success in [
+                   ("none", "trade", "cruise", True), ("none", "trade", "evasive", True),
+                   ("none", "dcf", "cruise", True), ("none", "dcf", "evasive", False),
+                   ("ambiguous", "trade", "cruise", True), ("ambiguous", "trade", "evasive", False),
+                   ("ambiguous", "dcf", "cruise", False), ("ambiguous", "dcf", "evasive", False)]]
+    md = render_markdown(summarise(results), {"commit": "c", "date_utc": "d", "cpu": "x", "cores": 1,
+                                              "renderer": "r", "runs": 8, "wall_s": 1.0, "jobs": 1}, {}, [], [])
+    assert "| tier | scripted (trade) | scripted (dcf) |" in md
+    assert "| breadth_none | 1 (2) | 0.5 (2) |" in md and "| breadth_ambiguous | 0.5 (2) | 0 (2) |" in md
+    assert "| follower | cruise, fixed | evasive, fixed | success | following | collision |" in md
+    assert "| scripted (dcf) | 1 (1) | 0 (1) | 0.5 (2) | 0.57 (2) | 0 (2) |" in md
+    written = plots.plot_suite(results, tmp_path)
+    assert [p.name for p in written] == ["breadth_success.png"] and written[0].stat().st_size > 0
+    assert plots.plot_suite(results[:0], tmp_path) == []

@@ -261,6 +261,7 @@ def write_outputs(args: argparse.Namespace, results: list[RunResult], meta: dict
     for group in dict.fromkeys(r.spec.group for r in results):
         runs = [r for r in results if r.spec.group == group]
         written += plots.plot_group(runs, group, runs[0].spec.depth_kind, out)
+    written += plots.plot_suite(results, out)
     video = None
     flown = [r for r in results if r.error is None]
     # the video shows the first run with the TRADE stack (its overlays), else the first run at all

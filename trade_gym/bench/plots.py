@@ -216,3 +216,40 @@ def plot_group(results: Sequence[RunResult], group: str, depth_kind: str, out: P
         plot_paths(results, f"{group} paths", out / f"{group}_paths.png"),
     ]
     return [p for p in written if p is not None]
+
+
+BREADTH_MOTION_KEY, BREADTH_TIER_KEY = "target_motion", "decoys"  # the breadth suite's axes (env keywords)
+
+
+def plot_breadth(results: Sequence[RunResult], path: Path) -> Path | None:
+    """Success rate by decoy tier (bars) and target motion (groups of bars), one panel per follower x perception,
+    pooled over scenes and appearances; None without breadth runs."""
+    runs = [r for r in results if r.spec.kind == "breadth" and r.error is None and r.metrics.get("success") is not None]
+    if not runs:
+        return None
+    panels = list(dict.fromkeys((r.spec.policy, r.spec.perception) for r in runs))
+    tiers = list(dict.fromkeys(r.spec.switch_value(BREADTH_TIER_KEY) for r in runs))
+    motions = list(dict.fromkeys(r.spec.switch_value(BREADTH_MOTION_KEY) for r in runs))
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels), 3.2), squeeze=False, sharey=True)
+    width = 0.8 / len(tiers)
+    for ax, (policy, perception) in zip(axes[0], panels):
+        for i, tier in enumerate(tiers):
+            rates = []
+            for motion in motions:
+                hits = [bool(r.metrics["success"]) for r in runs if (r.spec.policy, r.spec.perception) == (policy, perception)
+                        and r.spec.switch_value(BREADTH_TIER_KEY) == tier
+                        and r.spec.switch_value(BREADTH_MOTION_KEY) == motion]
+                rates.append(np.mean(hits) if hits else np.nan)
+            ax.bar(np.arange(len(motions)) + (i - (len(tiers) - 1) / 2) * width, rates, width, label=tier,
+                   color=f"C{i}")
+        ax.set_xticks(np.arange(len(motions)), motions, fontsize=8)
+        ax.set(title=f"{policy}, {perception}", ylim=(0, 1.05))
+        ax.grid(alpha=0.3, axis="y")
+    axes[0][0].set_ylabel("success rate")
+    axes[0][-1].legend(title="decoys", fontsize=LEGEND_FONT_SIZE)
+    return _save(fig, path)
+
+
+def plot_suite(results: Sequence[RunResult], out: Path) -> list[Path]:
+    """The figures across a suite's groups (the breadth suite's success rate by tier and motion)."""
+    return [p for p in (plot_breadth(results, out / "breadth_success.png"),) if p is not None]

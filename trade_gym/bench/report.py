@@ -185,8 +185,58 @@ def latency_pivot(records: Sequence[Record]) -> list[str]:
     return table(["scene", "follower"] + [f"{fmt(v)} ms: error [m] / tracked (visible)" for v in latencies], rows)
 
 
+def pooled_mean(records: Sequence[Record], metric: str) -> tuple[float, int]:
+    """The mean of `metric` over every run of `records` (each record's mean weighted by its run count), and n."""
+    stats = [r["metrics"][metric] for r in records if r["metrics"][metric]["n"]]
+    n = sum(s["n"] for s in stats)
+    return (sum(s["mean"] * s["n"] for s in stats) / n if n else math.nan), n
+
+
+BREADTH_AXES = ("target_motion", "appearance")  # the breadth groups' switch grid
+
+
+def breadth_pivot(records: Sequence[Record]) -> list[str]:
+    """One decoy tier: per follower and perception, the success rate for each target motion x appearance (pooled
+    over scenes), then success, following and collision rates over all its runs; cells 'rate (runs)'."""
+    cells = list(dict.fromkeys(tuple(r["switches"][a] for a in BREADTH_AXES) for r in records))
+    rows = []
+    for policy, perception in dict.fromkeys((r["policy"], r["perception"]) for r in records):
+        mine = [r for r in records if r["policy"] == policy and r["perception"] == perception]
+        row = [f"{policy} ({perception})"]
+        for cell in cells:
+            rate, n = pooled_mean([r for r in mine if tuple(r["switches"][a] for a in BREADTH_AXES) == cell], "success")
+            row.append(f"{fmt(rate, 2)} ({n})")
+        for metric in ("success", "following_rate", "collision_rate"):
+            rate, n = pooled_mean(mine, metric)
+            row.append(f"{fmt(rate, 2)} ({n})")
+        rows.append(row)
+    header = ["follower"] + [f"{motion}, {look}" for motion, look in cells] + ["success", "following", "collision"]
+    return ["Success rate per target motion and appearance (runs pooled over scenes), then all runs' success, "
+            "following and collision rates; (n) = runs with the score defined.", ""] + table(header, rows)
+
+
+def breadth_headline(summary: Sequence[Record]) -> list[str]:
+    """Across the breadth groups: the success rate per decoy tier for each follower and perception (runs pooled
+    over scenes, motions and appearances); nothing without breadth records."""
+    records = [r for r in summary if r["kind"] == "breadth"]
+    if not records:
+        return []
+    columns = list(dict.fromkeys((r["policy"], r["perception"]) for r in records))
+    rows = []
+    for group in dict.fromkeys(r["group"] for r in records):
+        mine = [r for r in records if r["group"] == group]
+        row = [group]
+        for policy, perception in columns:
+            rate, n = pooled_mean([r for r in mine if (r["policy"], r["perception"]) == (policy, perception)],
+                                  "success")
+            row.append(f"{fmt(rate, 2)} ({n})")
+        rows.append(row)
+    return ["## Breadth headline: success rate per decoy tier", ""] + \
+        table(["tier"] + [f"{p} ({q})" for p, q in columns], rows) + [""]
+
+
 PIVOTS = {"table1": table1_pivot, "table2": table2_pivot, "tracking": tracking_pivot, "follow": follow_pivot,
-          "unseen": unseen_pivot, "latency": latency_pivot}
+          "unseen": unseen_pivot, "latency": latency_pivot, "breadth": breadth_pivot}
 
 
 def render_markdown(summary: Sequence[Record], meta: Record, titles: dict[str, str], failures: Sequence[str],
@@ -198,6 +248,7 @@ def render_markdown(summary: Sequence[Record], meta: Record, titles: dict[str, s
              "", "Means ± sample std over seeds; depth RMSE pooled over all frames of all runs; "
              "[n] after a depth RMSE: the frames it pools; tracking scores over frames with the target visible "
              "(the visible fraction beside them); `–` = undefined (no such frame).", ""]
+    lines += breadth_headline(summary)
     for group in dict.fromkeys(r["group"] for r in summary):
         records = [r for r in summary if r["group"] == group]
         lines += [f"## {titles.get(group, group)}", ""]

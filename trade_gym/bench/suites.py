@@ -11,11 +11,11 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from trade_gym.bench.splits import DEVELOPMENT, EVALUATION
-from trade_gym.config import CAMERA_RATE_HZ, SCENE_NAMES, EnvConfig
+from trade_gym.config import APPEARANCE_MODES, CAMERA_RATE_HZ, SCENE_NAMES, TARGET_MOTIONS, EnvConfig
 
 Kwargs = tuple[tuple[str, Any], ...]  # sorted (name, value) pairs: hashable env keyword arguments
 # Which table a group renders in results.md (and how its runs are compared).
-GROUP_KINDS = ("follow", "tracking", "table1", "table2", "unseen", "latency", "custom")
+GROUP_KINDS = ("follow", "tracking", "table1", "table2", "unseen", "latency", "breadth", "custom")
 BOOL_SWITCHES = tuple(f.name for f in fields(EnvConfig) if f.type == "bool")
 # The paper's protocol: one sequence per scene (a fixed world), each run of it with its first tracked
 # frame shifted within 10 frames and its initial box perturbed within 5 px (and its own sensor noise);
@@ -36,6 +36,11 @@ TUNING_WORLDS = (DEVELOPMENT.first + 100, DEVELOPMENT.first + 119)
 LATENCIES_MS = (0.0, 33.0, 100.0, 200.0, 400.0)
 LATENCY_PROTOCOL: Kwargs = (("perception_latency", "fixed"),)
 LATENCY_WORLDS = (0, 0)  # development world seeds (reset seed = world seed), first and last
+# Scenario breadth: one table per decoy tier, each the grid target motion x appearance x follower x perception,
+# vio pose, one run per configuration on the first evaluation world of each scene, so every configuration of a
+# scene meets the same world (paired comparisons; `--seeds 5000 5004` widens it to more worlds).
+BREADTH_TIERS = ("none", "parked", "ambiguous")  # easiest first
+BREADTH_WORLDS = (EVALUATION.first, EVALUATION.first)
 
 
 @dataclass(frozen=True)
@@ -95,6 +100,8 @@ class RunSpec:
 
 def switch_text(value: Any) -> str:
     """A switch value in an id: 0/1 for a bool (as ids always had), the shortest form of a number."""
+    if isinstance(value, str):  # a categorical option, e.g. target_motion=evasive
+        return value
     return str(int(value)) if isinstance(value, bool) else f"{value:g}"
 
 
@@ -220,6 +227,16 @@ def _latency_groups(steps: int, camera_size: int) -> tuple[GroupSpec, ...]:
     )
 
 
+def _breadth_groups(steps: int, camera_size: int) -> tuple[GroupSpec, ...]:
+    return tuple(
+        GroupSpec(f"breadth_{tier}", "breadth", f"Scenario breadth, decoys={tier}: success rate by target motion "
+                  "and appearance, scripted and learned followers, full TRADE and DCF, vio pose", ALL_SCENES,
+                  ("scripted", "learned"), ("trade", "dcf"), ("vio",), BREADTH_WORLDS, steps, camera_size,
+                  (("target_motion", TARGET_MOTIONS), ("appearance", APPEARANCE_MODES)),
+                  UNSEEN_PROTOCOL + (("decoys", tier),))
+        for tier in BREADTH_TIERS)
+
+
 PAPER_STEPS, FULL_STEPS = 450, 900  # 15 s sequences (about an hour on 2 cores); the env's full 30 s
 PAPER_CAMERA_PX = 256
 
@@ -229,15 +246,16 @@ SUITES: dict[str, tuple[GroupSpec, ...]] = {
     "unseen": _unseen_groups(PAPER_STEPS, PAPER_CAMERA_PX),
     "tuning": _unseen_groups(PAPER_STEPS, PAPER_CAMERA_PX, "tuning", TUNING_WORLDS, "development"),
     "latency": _latency_groups(PAPER_STEPS, PAPER_CAMERA_PX),
+    "breadth": _breadth_groups(PAPER_STEPS, PAPER_CAMERA_PX),
     "full": _paper_groups(FULL_STEPS, PAPER_CAMERA_PX) + (
         GroupSpec("policies", "follow", "Followers on oracle and TRADE perception",
                   ALL_SCENES, ("scripted", "learned", "hover", "random"), ("oracle", "trade"), ("gt",),
                   TRACKING_RUNS, FULL_STEPS, PAPER_CAMERA_PX),
     ),
 }
-SUITE_JOBS = {"quick": 2, "paper": 2, "unseen": 2, "tuning": 2, "latency": 2, "full": 2}  # default --jobs per suite
+SUITE_JOBS = {"quick": 2, "paper": 2, "unseen": 2, "tuning": 2, "latency": 2, "breadth": 2, "full": 2}  # default --jobs per suite
 # Suites that fly evaluation worlds; no other suite or grid may (`trade_gym.bench.splits`).
-EVALUATION_SUITES = ("unseen",)
+EVALUATION_SUITES = ("unseen", "breadth")
 
 # A run without --suite: one grid of the chosen axes, these defaults where nothing was chosen.
 CUSTOM_DEFAULTS = GroupSpec("custom", "custom", "Custom grid", ALL_SCENES, ("scripted",), ("oracle",), ("gt",),

@@ -77,6 +77,6 @@ def summarise(results: Sequence[RunResult]) -> list[dict[str, Any]]:
 def config_label(record: dict[str, Any]) -> str:
     """Short label of a configuration within its group and scene (for tables and plot legends)."""
     parts = [record["policy"], record["perception"], record["pose_source"]]
-    parts += [f"{'+' if v else '-'}{k}" if isinstance(v, bool) else f"{k}={v:g}"
+    parts += [f"{'+' if v else '-'}{k}" if isinstance(v, bool) else f"{k}={v}" if isinstance(v, str) else f"{k}={v:g}"
               for k, v in record["switches"].items()]
     return " ".join(parts)
