@@ -19,7 +19,7 @@ from trade_gym.action import ACTION_DIM
 
 DEFAULT_POLICY = ASSETS_DIR / "policies" / "follower_ppo.onnx"
 # SHA-256 of the shipped policy, printed by `python -m agents.train` and recorded in follower_ppo.md
-DEFAULT_POLICY_SHA256 = "385343ea465a41a1b14b5b5a12d0b7fb41180b7136ab01c4d3ae1eb0c54ae050"
+DEFAULT_POLICY_SHA256 = "71efd3165ec1d06bd22c519796d9e4a6cc47a15d74216d19eddff32f2be401f1"
 
 
 class AgentError(Exception):
