@@ -13,13 +13,15 @@ import numpy as np
 import pytest
 
 from trade_gym.bench import cli, failures, plots, runner
+from trade_gym.bench import results as results_module
 from trade_gym.bench.plots import nanmean_ragged
-from trade_gym.bench.policies import HoverPolicy, available_policies, learned_unavailable_reason, make_policy
+from trade_gym.bench.policies import (POLICY_NAMES, HoverPolicy, available_policies, learned_unavailable_reason,
+                                      make_policy)
 from trade_gym.bench.report import render_markdown, table1_pivot, tracking_pivot
 from trade_gym.bench.results import deterministic_part, load_schema, to_json_safe
-from trade_gym.bench.suites import SUITES, RunSpec, Selection, expand_suite
+from trade_gym.bench.suites import GROUP_KINDS, SUITES, RunSpec, Selection, expand_suite
 from trade_gym.bench.summary import metric_stats, pooled_rmse, summarise
-from trade_gym.config import SCENE_NAMES
+from trade_gym.config import PERCEPTION_MODES, POSE_SOURCES, SCENE_NAMES
 from trade_gym.metrics import METRIC_NAMES
 
 ALL = ("scripted", "learned", "hover", "random")
@@ -390,3 +392,22 @@ def test_breadth_report_gives_success_per_tier_and_motion_and_plots_it(tmp_path)
     written = plots.plot_suite(results, tmp_path)
     assert [p.name for p in written] == ["breadth_success.png"] and written[0].stat().st_size > 0
     assert plots.plot_suite(results[:0], tmp_path) == []
+
+
+def test_schema_enums_name_every_suite_group_kind_and_axis_of_the_code():
+    schema = load_schema()
+    meta_suite = schema["properties"]["meta"]["properties"]["suite"]["enum"]
+    config = schema["$defs"]["config"]["properties"]
+    assert set(meta_suite) == set(SUITES) | {None}
+    assert set(config["kind"]["enum"]) == set(GROUP_KINDS)
+    assert set(config["scene"]["enum"]) == set(SCENE_NAMES)
+    assert set(config["policy"]["enum"]) == set(POLICY_NAMES)
+    assert set(config["perception"]["enum"]) == set(PERCEPTION_MODES)
+    assert set(config["pose_source"]["enum"]) == set(POSE_SOURCES)
+
+
+def test_breadth_suite_document_is_schema_valid():
+    results = [_breadth_result(tier, "learned", "trade", "stop_and_go", tier == "none") for tier in ("none", "parked")]
+    meta = results_module.collect_meta("breadth", ["--suite", "breadth"], 2, len(results), 1.0)
+    doc = to_json_safe(results_module.build_document(results, summarise(results), meta, [], None))
+    jsonschema.validate(doc, load_schema())
