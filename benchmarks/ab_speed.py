@@ -1,8 +1,11 @@
 """Before/after oracle step rate in one run: alternate subprocesses on a baseline source tree and on
 this tree, so both see the same machine load, and report the ratio of their CPU-time rates.
 
+With --rendered, the env also renders its camera every step (oracle perception with `render_oracle_frames`,
+256 px unless --camera-size): the step rate of an image-based env without perception's own cost.
+
 Usage: git worktree add /tmp/base <commit>; python benchmarks/ab_speed.py --base /tmp/base
-       [--scene desert] [--steps 1500] [--rounds 3] [--json OUT]
+       [--scene desert] [--steps 1500] [--rounds 3] [--rendered [--camera-size 256]] [--json OUT]
 """
 
 from __future__ import annotations
@@ -25,8 +28,9 @@ _PROBE = """
 import json, sys, time, numpy as np
 from agents import ScriptedFollower
 from trade_gym.env import TradeFollowEnv
-scene, steps = sys.argv[1], int(sys.argv[2])
-env = TradeFollowEnv(scene=scene, perception="oracle")
+scene, steps, camera_px = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+kwargs = dict(render_oracle_frames=True, camera_size=camera_px) if camera_px > 0 else {}
+env = TradeFollowEnv(scene=scene, perception="oracle", **kwargs)
 policy = ScriptedFollower()
 obs, _ = env.reset(seed=0)
 cpu = wall = 0.0
@@ -45,9 +49,10 @@ print(json.dumps({"cpu_steps_per_s": steps / cpu, "wall_steps_per_s": steps / wa
 """
 
 
-def _measure(tree: Path, scene: str, steps: int) -> dict:
+def _measure(tree: Path, scene: str, steps: int, camera_px: int = 0) -> dict:
+    """One probe run on `tree`; `camera_px` > 0 renders the camera at that size every step."""
     env = dict(os.environ, PYTHONPATH=str(tree))
-    out = subprocess.run([sys.executable, "-c", _PROBE, scene, str(steps)], cwd=tree, env=env,
+    out = subprocess.run([sys.executable, "-c", _PROBE, scene, str(steps), str(camera_px)], cwd=tree, env=env,
                          capture_output=True, text=True, check=True).stdout
     return json.loads(out.strip().splitlines()[-1])
 
@@ -79,19 +84,23 @@ def main() -> None:
     parser.add_argument("--scene", default="desert")
     parser.add_argument("--steps", type=int, default=1500)
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--rendered", action="store_true", help="render the camera every step")
+    parser.add_argument("--camera-size", type=int, default=256, help="with --rendered: image side [px]")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()
+    camera_px = args.camera_size if args.rendered else 0
     if not (args.base / "trade_gym").is_dir():
         parser.error(f"--base {args.base} holds no trade_gym package")
     base, new = [], []
     for _ in range(args.rounds):
-        base.append(_measure(args.base, args.scene, args.steps))
-        new.append(_measure(HERE, args.scene, args.steps))
+        base.append(_measure(args.base, args.scene, args.steps, camera_px))
+        new.append(_measure(HERE, args.scene, args.steps, camera_px))
     ratios = [n["cpu_steps_per_s"] / b["cpu_steps_per_s"] for b, n in zip(base, new)]
     meta = run_meta(args.base)  # both commits, date, CPU, cores, load
     result = {
         "scene": args.scene,
         "steps_per_round": args.steps,
+        "rendered_camera_px": camera_px or None,
         "base_commit": meta["base_commit"],
         "new_commit": meta["new_commit"],
         "cpu": meta["cpu"],

@@ -119,7 +119,9 @@ def render_world_views(cid: int, scene: str, seed: int, count: int, cfg: ViewCon
         pitch = float(rng.uniform(cfg.pitch_min_deg, cfg.pitch_max_deg))
         camera = Camera(cid, CameraConfig(width_px=cfg.size_px, height_px=cfg.size_px, fov_deg=cfg.fov_deg,
                                           pitch_deg=pitch, far_m=cfg.far_m))
-        frame = camera.render(camera.pose(rotation_z(float(rng.uniform(-np.pi, np.pi))), (xy[0], xy[1], z)))
+        pose = camera.pose(rotation_z(float(rng.uniform(-np.pi, np.pi))), (xy[0], xy[1], z))
+        world.prepare_render(pose, camera.intrinsics, camera.config.near_m, camera.config.far_m)
+        frame = camera.render(pose)
         views.append(View(frame.rgb, frame.depth_m, frame.T_world_cam, t_s, pitch, agl))
     return views
 

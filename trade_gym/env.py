@@ -184,9 +184,9 @@ class TradeFollowEnv(gym.Env):
         p.setTimeStep(1.0 / PHYSICS_RATE_HZ, physicsClientId=cid)
         rng, look_rng = self.np_random, appearance_stream(self.np_random, self.config.appearance)
         world_rng = rng if self.config.world_seed is None else np.random.default_rng(self.config.world_seed)
-        self.world = build_world(cid, self.config.scene, world_rng, self.config.target_speed_mps,
-                                 DecoyTier(self.config.decoys, self.config.camera_fov_deg),
-                                 TargetMotion(self.config.target_motion, self.config.camera_fov_deg))
+        cfg = self.config
+        self.world = build_world(cid, cfg.scene, world_rng, cfg.target_speed_mps, DecoyTier(cfg.decoys, cfg.camera_fov_deg),
+                                 TargetMotion(cfg.target_motion, cfg.camera_fov_deg), rendered=cfg.needs_rendering)
         self._look = EpisodeLook(look_rng, self.world, self.camera)
         start_position, start_yaw = self.world.drone_start()
         self.quadrotor.spawn(start_position, start_yaw)

@@ -25,13 +25,15 @@ from trade_gym.sim.vehicles import PALETTE_CELL_PX, PALETTE_RGB
 FRAMES = dict(perception="oracle", render_oracle_frames=True, camera_size=64)
 ACTION = np.array([0.3, -0.2, 0.1, 0.4], dtype=np.float32)
 STEPS = 3
-# sha256 over (rgb, depth_m, seg) bytes of the reset frame and STEPS frames after ACTION, FRAMES settings, reset
-# seed 7: made on 592a6cc (main before the appearance option existed) by a throwaway script running the loop of
-# `_episode` and `_frames_hash` below without the `appearance` argument
+# sha256 over (rgb, depth_m, vehicle labels) bytes of the reset frame and STEPS frames after ACTION, FRAMES
+# settings, reset seed 7, labels from seg: 1 target, 2 + i decoy i, 0 anything else (the static bodies' own ids
+# are the world's business: the terrain is built as tiles). Made on 0372246 by this file's `_episode` and
+# `_frames_hash` without the `appearance` argument; on that commit the same loop hashing (rgb, depth_m, seg) gave
+# the hashes made on 592a6cc, before the appearance option existed, so "fixed" still renders as then.
 HASHES_BEFORE_APPEARANCE = {
-    "desert": "e73a312236946085173c6382d93e7ab24901ea284cf345e3bb786f8b5f09be2c",
-    "city": "eb2db6694c07ea7f9f5374a315aebe0a999cbaa05f321d29d8d0a4604fadf3f1",
-    "mountain": "a67bbb58e9a3228b4079fd6b1ae170a80dcbea7883cbdbe808bd22f0d0d8d02d",
+    "desert": "fa169c1c6cc57f2cbefa113ec278947dfb14128ba095291552ab43f465ae4780",
+    "city": "d014e264f5626aff84aba6b56b23dcd27681f4cd8fa2c9dd54fd5c12824d9c14",
+    "mountain": "8e14a225b6a4dbc2b68951fe1cdd355fda3067ed8f1b35c6535b3bbc7d076ce2",
 }
 TRUTH_KEYS = ("gt_bbox", "target_visible_fraction", "target_depth_gt", "ground_depth_gt", "decoy_bboxes",
               "drone_position_m", "target_position_m")
@@ -42,15 +44,24 @@ def _episode(seed: int, steps: int = STEPS, **kwargs):
     env = gym.make("TradeFollow-v0", **{**FRAMES, **kwargs})
     try:
         obs, info = env.reset(seed=seed)
-        frames, infos, observations = [env.unwrapped.camera_frame], [info], [obs]
+        frames, infos, observations = [_labelled(env)], [info], [obs]
         for _ in range(steps):
             obs, _, _, _, info = env.step(ACTION)
-            frames.append(env.unwrapped.camera_frame)
+            frames.append(_labelled(env))
             infos.append(info)
             observations.append(obs)
         return infos[0], frames, infos, observations
     finally:
         env.close()
+
+
+def _labelled(env) -> CameraFrame:
+    """The env's camera frame with seg turned into vehicle labels: 1 target, 2 + i decoy i, 0 anything else."""
+    frame, world = env.unwrapped.camera_frame, env.unwrapped.world
+    labels = np.zeros_like(frame.seg)
+    for label, vehicle in enumerate((world.target, *world.decoys), start=1):
+        labels[frame.seg == vehicle.body_id] = label
+    return CameraFrame(frame.rgb, frame.depth_m, labels, frame.T_world_cam, frame.intrinsics)
 
 
 def _frames_hash(frames: list[CameraFrame]) -> str:

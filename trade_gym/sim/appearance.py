@@ -147,8 +147,13 @@ def apply_to_world(world: World, appearance: Appearance) -> None:
                                                                    a.ground_contrast))
     texture = p.loadTexture(str(path), physicsClientId=cid)
     for body in world.body_ids_by_role["terrain"]:
-        p.changeVisualShape(body, -1, textureUniqueId=texture, rgbaColor=[*a.ground_tint_rgb, 1.0],
-                            physicsClientId=cid)
+        p.changeVisualShape(body, -1, textureUniqueId=texture, physicsClientId=cid)
+    tint = [*a.ground_tint_rgb, 1.0]
+    if world.culler is not None:  # it owns the tiles' colour (a hidden tile keeps zero alpha until shown)
+        world.culler.set_colour(tint)
+    else:
+        for body in world.body_ids_by_role["terrain"]:
+            p.changeVisualShape(body, -1, rgbaColor=tint, physicsClientId=cid)
     path = variant_path("vehicle_palette", f"h{a.vehicle_hue_shift_deg:g}",
                         lambda rgb: palette_variant(rgb, VEHICLE_PAINT_CELLS, a.vehicle_hue_shift_deg))
     palette = p.loadTexture(str(path), physicsClientId=cid)
@@ -165,6 +170,7 @@ class EpisodeLook:
 
     def __init__(self, stream: np.random.Generator | None, world: World, camera: Camera) -> None:
         self.camera = camera
+        self.world = world
         self.appearance: Appearance | None = None
         self._effects: CameraEffects | None = None
         if stream is None:
@@ -182,6 +188,8 @@ class EpisodeLook:
     def render(self, T_world_cam: Pose, state: DroneState) -> CameraFrame:
         """The frame from `T_world_cam` as the camera delivers it; `state` (the drone's velocity and body rates)
         smears it over the exposure. Depth and segmentation are the renderer's either way."""
+        cfg = self.camera.config
+        self.world.prepare_render(T_world_cam, self.camera.intrinsics, cfg.near_m, cfg.far_m)
         if self.appearance is None:
             return self.camera.render(T_world_cam)
         frame = self.camera.render(T_world_cam, self.appearance.lighting)

@@ -124,36 +124,29 @@ def grid_triangles(ny: int, nx: int) -> npt.NDArray[np.int64]:
 
 
 @lru_cache(maxsize=8)
-def _grid_uv_list(ny: int, nx: int, x0_m: float, y0_m: float, spacing_m: float, period_m: float) -> list:
-    """Seed-independent UV list of a grid (world x, y / period), cached per process."""
+def grid_uvs(ny: int, nx: int, x0_m: float, y0_m: float, spacing_m: float, period_m: float) -> FloatArray:
+    """(ny, nx, 2) seed-independent UVs of a grid (world x, y / period), cached per process (read-only)."""
     gx, gy = np.meshgrid(x0_m + spacing_m * np.arange(nx), y0_m + spacing_m * np.arange(ny))
-    return (np.stack([gx, gy], axis=-1).reshape(-1, 2) / period_m).tolist()
+    uv = np.stack([gx, gy], axis=-1) / period_m
+    uv.setflags(write=False)
+    return uv
 
 
-@lru_cache(maxsize=8)
-def _grid_index_list(ny: int, nx: int) -> list:
-    return grid_triangles(ny, nx).ravel().tolist()
-
-
-def create_terrain_visual(client_id: int, x_m: FloatArray, y_m: FloatArray, heights_m: FloatArray,
-                          normals: FloatArray, period_m: float, origin_m: FloatArray,
+def create_terrain_visual(client_id: int, vertices_m: FloatArray, uvs: FloatArray, normals: FloatArray,
                           drop_vertex: npt.NDArray[np.bool_] | None = None) -> int:
-    """Visual shape of the heightfield grid in a body frame at world `origin_m` (3,), UV = world x, y / period;
-    triangles whose three vertices are all flagged in `drop_vertex` (ny, nx) are left out (under a lake).
-    The triangulation is Bullet's (see `grid_triangles`), so the picture matches the collision surface."""
-    ny, nx = heights_m.shape
-    gx, gy = np.meshgrid(x_m - origin_m[0], y_m - origin_m[1])
-    verts = np.stack([gx, gy, heights_m.astype(np.float64) - origin_m[2]], axis=-1).reshape(-1, 3)
-    if drop_vertex is None:
-        indices = _grid_index_list(ny, nx)
-    else:  # kept triangles first, then degenerate (0, 0, 0) ones: a fixed length, so the list is pooled
-        tris = grid_triangles(ny, nx)
+    """Visual shape of a (sub-)grid of the heightfield: `vertices_m` (ny, nx, 3) in the body frame, `uvs`
+    (ny, nx, 2), `normals` (ny, nx, 3); triangles whose three vertices are all flagged in `drop_vertex` (ny, nx)
+    are left out (under a lake). The triangulation is Bullet's (see `grid_triangles`), so the picture matches
+    the collision surface."""
+    ny, nx = vertices_m.shape[:2]
+    tris = grid_triangles(ny, nx)
+    if drop_vertex is not None:  # kept triangles first, then degenerate (0, 0, 0) ones: a fixed length, so pooled
         kept = tris[~np.all(drop_vertex.ravel()[tris], axis=1)]
-        padded = np.zeros_like(tris)
-        padded[: len(kept)] = kept
-        indices = bullet_list("indices", padded.ravel())
-    uvs = _grid_uv_list(ny, nx, float(x_m[0]), float(y_m[0]), float(x_m[1] - x_m[0]), float(period_m))
-    return p.createVisualShape(p.GEOM_MESH, vertices=bullet_list("vertices", verts), indices=indices, uvs=uvs,
+        tris = np.zeros_like(tris)
+        tris[: len(kept)] = kept
+    return p.createVisualShape(p.GEOM_MESH, vertices=bullet_list("vertices", vertices_m.reshape(-1, 3)),
+                               indices=bullet_list("indices", tris.ravel()),
+                               uvs=bullet_list("uvs", uvs.reshape(-1, 2)),
                                normals=bullet_list("normals", normals.reshape(-1, 3)), physicsClientId=client_id)
 
 

@@ -6,6 +6,7 @@ Owns `World` and `build_world`; every pybullet call names the client explicitly.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -15,12 +16,14 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
+from trade.geometry import CameraIntrinsics, Pose
 from trade_gym.sim import city, desert, mountain
 from trade_gym.sim.bullet_lists import bullet_list
+from trade_gym.sim.culling import ViewCuller
 from trade_gym.sim.evasive import EvasiveMotion
 from trade_gym.sim.layout import SceneLayout, parked
 from trade_gym.sim.meshes import (
-    TEXTURE_PERIOD_M, Mesh, building_meshes, create_terrain_visual, placed_meshes, polygon_mesh, rock_mesh,
+    TEXTURE_PERIOD_M, Mesh, building_meshes, create_terrain_visual, grid_uvs, placed_meshes, polygon_mesh, rock_mesh,
     strip_mesh, texture_path,
 )
 from trade_gym.sim.roofs import RoofIndex
@@ -37,6 +40,10 @@ ROAD_SAMPLE_M = 1.0
 LAKE_LIFT_M = 0.02  # lake surface drawn this far above the (flat) terrain under it
 LAKE_RGBA = (0.80, 0.86, 0.90, 1.0)  # icy, uniform colour, no texture
 WHITE_RGBA = (1.0, 1.0, 1.0, 1.0)
+# The terrain mesh is built as this many tiles per side, so the tiles outside the camera's view can be left out of
+# a render (`trade_gym.sim.culling`). At the scenes' follow heights the 110 deg camera sees a 2.9 h wide footprint
+# (46-92 m of 200-250 m terrains), a few tiles; more tiles trim closer but cost a body each.
+TERRAIN_TILES_PER_SIDE = 8
 LAYOUT_BUILDERS = MappingProxyType(
     {"desert": desert.make_desert, "city": city.make_city, "mountain": mountain.make_mountain}
 )
@@ -65,21 +72,40 @@ def _textured_body(cid: int, mesh: Mesh, texture_id: int, collision: int = -1) -
     return _static_body(cid, collision, mesh.create_visual_shape(cid), texture_id=texture_id)
 
 
-def _terrain_body(cid: int, layout: SceneLayout, texture_id: int) -> int:
-    """Heightfield collision + identical textured grid mesh (triangulated the same way)."""
+def _tile_edges(cells: int, tiles: int) -> npt.NDArray[np.int64]:
+    """Cell indices where `tiles` tiles start along a side of `cells` cells, then `cells`."""
+    return np.round(np.linspace(0, cells, min(tiles, cells) + 1)).astype(np.int64)
+
+
+def _terrain_tiles(cid: int, layout: SceneLayout, texture_id: int,
+                   tiles_per_side: int) -> tuple[tuple[int, ...], ViewCuller]:
+    """The heightfield's textured grid mesh (triangulated like the collision surface) as tiles_per_side^2
+    tiles, each a body at the heightfield's origin; the first also carries the GEOM_HEIGHTFIELD collision.
+    Returns the tile bodies and the culler that owns their colour."""
     hf = layout.terrain
     ny, nx = hf.shape
     collision = p.createCollisionShape(p.GEOM_HEIGHTFIELD, meshScale=[hf.spacing_m, hf.spacing_m, 1.0],
                                        heightfieldData=bullet_list("heightfield", hf.heights_m.ravel()),
                                        numHeightfieldRows=nx, numHeightfieldColumns=ny, physicsClientId=cid)
     origin = np.array([*hf.centre_m, hf.bullet_base_z_m])
-    drop = None
-    if layout.lake is not None:
-        gx, gy = np.meshgrid(hf.x_m, hf.y_m)
-        drop = layout.lake.normalised_radius(gx, gy) <= 1.0
-    visual = create_terrain_visual(cid, hf.x_m, hf.y_m, hf.heights_m, hf.vertex_normals(),
-                                   TEXTURE_PERIOD_M[layout.spec.ground_texture], origin, drop)
-    return _static_body(cid, collision, visual, tuple(origin.tolist()), texture_id)
+    gx, gy = np.meshgrid(hf.x_m, hf.y_m)
+    vertices = np.stack([gx - origin[0], gy - origin[1], hf.heights_m.astype(np.float64) - origin[2]], axis=-1)
+    uvs = grid_uvs(ny, nx, float(hf.x_m[0]), float(hf.y_m[0]), float(hf.x_m[1] - hf.x_m[0]),
+                   float(TEXTURE_PERIOD_M[layout.spec.ground_texture]))
+    normals = hf.vertex_normals().reshape(ny, nx, 3)
+    drop = layout.lake.normalised_radius(gx, gy) <= 1.0 if layout.lake is not None else None
+    bodies, lo, hi = [], [], []
+    for r0, r1 in itertools.pairwise(_tile_edges(ny - 1, tiles_per_side)):
+        for c0, c1 in itertools.pairwise(_tile_edges(nx - 1, tiles_per_side)):
+            rows, cols = slice(r0, r1 + 1), slice(c0, c1 + 1)
+            visual = create_terrain_visual(cid, vertices[rows, cols], uvs[rows, cols], normals[rows, cols],
+                                           None if drop is None else drop[rows, cols])
+            bodies.append(_static_body(cid, collision if not bodies else -1, visual, tuple(origin.tolist()),
+                                       texture_id))
+            heights = hf.heights_m[rows, cols]
+            lo.append((hf.x_m[c0], hf.y_m[r0], float(heights.min())))
+            hi.append((hf.x_m[c1], hf.y_m[r1], float(heights.max())))
+    return tuple(bodies), ViewCuller(cid, bodies, lo, hi, [WHITE_RGBA] * len(bodies))
 
 
 def _boulder_body(cid: int, layout: SceneLayout, texture_id: int) -> int:
@@ -124,13 +150,14 @@ class World:
     target's also of where the drone was (`update` is told each frame; `trade_gym.sim.evasive`).
 
     Attributes: `spec`, `layout` (everything generated), `terrain` (Heightfield), `target` and `decoys`
-    (Vehicle), `body_ids_by_role` (terrain, boulders (all rocks in one body), buildings, road, lake) and
-    `static_body_ids` (a frozenset of all of those; road and lake have no collision shape, the terrain's is a
-    GEOM_HEIGHTFIELD matching `terrain`).
+    (Vehicle), `body_ids_by_role` (terrain (its tiles), boulders (all rocks in one body), buildings, road, lake),
+    `static_body_ids` (a frozenset of all of those; road and lake have no collision shape, the terrain's first tile
+    carries a GEOM_HEIGHTFIELD matching `terrain`) and `culler` (`ViewCuller` of the terrain tiles, or None:
+    call `prepare_render` before each render).
     """
 
     def __init__(self, client_id: int, layout: SceneLayout, target: Vehicle, decoys: tuple[Vehicle, ...],
-                 body_ids_by_role: dict[str, tuple[int, ...]]) -> None:
+                 body_ids_by_role: dict[str, tuple[int, ...]], culler: ViewCuller | None = None) -> None:
         self.client_id = client_id
         self.layout = layout
         self.spec: SceneSpec = layout.spec
@@ -140,6 +167,7 @@ class World:
         # roles: terrain, boulders, buildings (walls with box collision, roofs), road and lake (visual only)
         self.body_ids_by_role = MappingProxyType(dict(body_ids_by_role))
         self.static_body_ids: frozenset[int] = frozenset(i for ids in self.body_ids_by_role.values() for i in ids)
+        self.culler = culler  # leaves the terrain tiles out of view out of a render; owns their colour
         self.roofs = RoofIndex(layout.buildings_lo_m, layout.buildings_hi_m)
         self._evasive = target.motion if isinstance(target.motion, EvasiveMotion) else None
         self._poses = VehiclePoses(client_id, self.terrain, (target, *decoys))  # places the parked ones
@@ -172,6 +200,11 @@ class World:
         if self._evasive is not None:
             self._evasive.advance(t_s, drone_position_m)
         self._poses.update(t_s)
+
+    def prepare_render(self, T_world_cam: Pose, K: CameraIntrinsics, near_m: float, far_m: float) -> None:
+        """Leave the terrain tiles this camera cannot see out of its next render (`ViewCuller.update`)."""
+        if self.culler is not None:
+            self.culler.update(T_world_cam, K, near_m, far_m)
 
     def place_vehicle_bodies(self) -> None:
         """Move the vehicles' pybullet bodies to their poses at the last `update` (call before rendering)."""
@@ -284,9 +317,12 @@ def _park_away(layout: SceneLayout, far_m: float, rng: np.random.Generator) -> t
 
 
 def build_world(client_id: int, scene: str, rng: np.random.Generator, target_speed_mps: float | None = None,
-                decoys: DecoyTier = DecoyTier(), target_motion: TargetMotion = TargetMotion()) -> World:
+                decoys: DecoyTier = DecoyTier(), target_motion: TargetMotion = TargetMotion(),
+                rendered: bool = True) -> World:
     """Generate and build `scene` in a freshly reset pybullet client (same rng state -> same world); `decoys`
-    picks which of the drawn decoys are built, `target_motion` how the target drives (drawn after the decoys)."""
+    picks which of the drawn decoys are built, `target_motion` how the target drives (drawn after the decoys).
+    A world that is never `rendered` gets its terrain as one tile (tiles pay only in renders; each costs
+    stepSimulation a static body's update per substep)."""
     spec = get_scene(scene)
     speed = spec.target_speed_mps if target_speed_mps is None else float(target_speed_mps)
     if not np.isfinite(speed) or speed <= 0.0:
@@ -297,8 +333,10 @@ def build_world(client_id: int, scene: str, rng: np.random.Generator, target_spe
     names |= {"facade", "roof"} if len(layout.buildings_lo_m) else set()
     names |= {"dirt_road"} if layout.road is not None else set()
     tex = {name: p.loadTexture(str(texture_path(name)), physicsClientId=client_id) for name in sorted(names)}
+    tiles_per_side = TERRAIN_TILES_PER_SIDE if rendered else 1
+    terrain_tiles, culler = _terrain_tiles(client_id, layout, tex[spec.ground_texture], tiles_per_side)
     roles = {
-        "terrain": (_terrain_body(client_id, layout, tex[spec.ground_texture]),),
+        "terrain": terrain_tiles,
         "boulders": (_boulder_body(client_id, layout, tex["rock"]),) if layout.boulders else (),
         "buildings": tuple(_building_bodies(client_id, layout, tex)),
         "road": (_road_body(client_id, layout, tex["dirt_road"]),) if layout.road is not None else (),
@@ -313,4 +351,4 @@ def build_world(client_id: int, scene: str, rng: np.random.Generator, target_spe
     target_half = vehicle_model(spec.target_kind).half_extents_m
     target = spawn(spec.target_kind, target_motion.build(layout, target_half, rng))
     decoys = tuple(spawn(spec.decoy_kind, m) for m in layout.decoys)
-    return World(client_id, layout, target, decoys, roles)
+    return World(client_id, layout, target, decoys, roles, culler)
