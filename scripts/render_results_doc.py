@@ -43,6 +43,16 @@ SECTIONS = (
      "the estimate of a frame reaches the observation 0, 33, 100, 200 or 400 ms later. Scores are of the "
      "estimate the policy holds against the current frame's truth (VOT's real-time rule). One run per cell.",
      ("latency",)),
+    ("Followers on unseen worlds (evaluation split)",
+     "The scripted and the learned follower flown under full TRADE with ground-truth and VIO pose on the 20 "
+     "evaluation worlds per scene, 450 frames at 256 px (the `unseen_follow` group of an unseen run, rendered "
+     "with `trade-bench --report DIR --tables unseen_follow`). The learned follower is the shipped "
+     "`assets/policies/follower_ppo.onnx` of the named commit.", ("unseen_follow",)),
+    ("Scenario breadth (evaluation worlds)",
+     "`trade-bench --suite breadth`: each decoy tier (`decoys=`), target motion (`target_motion=`) and appearance "
+     "(`appearance=`), flown by the scripted and the learned follower with full TRADE and with DCF, VIO pose, one "
+     "450-frame run per configuration on the first evaluation world of each scene. Success, following and "
+     "collision rate are EVT-Bench's episode scores (`trade_gym.metrics`).", ("breadth",)),
 )
 INTRO = """# Results
 
