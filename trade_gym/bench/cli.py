@@ -42,7 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "tables on its development worlds, ~1 h on 2 cores), unseen (the paper's protocol on the 20 "
                    "evaluation worlds per scene, ~1.5 h), tuning (the unseen grid on 20 development worlds, to tune "
                    "on), latency (full TRADE, scripted and learned followers, every scene, fixed perception latency "
-                   "0-400 ms, 30 runs, ~15 min), full (paper tables at full length plus all followers, hours)")
+                   "0-400 ms, 30 runs, ~15 min), breadth (every decoy tier x target motion x appearance, scripted and "
+                   "learned, TRADE and DCF, one evaluation world per scene, 216 runs, ~31 min with --jobs 2), full "
+                   "(paper tables at full length plus all followers, hours)")
     p.add_argument("--tables", nargs="+", metavar="GROUP", help="groups of the suite to run (see --list); with "
                    "--report, the groups of the earlier run to render (and --scenes its scenes)")
     p.add_argument("--scenes", nargs="+", choices=SCENE_NAMES)
