@@ -83,7 +83,7 @@ def test_import_agents_and_learned_does_not_import_torch():
 
 
 def test_predict_single_and_batched_observations_agree_and_stay_in_bounds():
-    follower = LearnedFollower()
+    follower = LearnedFollower(soft_start_s=0.0)
     space = observation_space()
     space.seed(0)
     observations = [space.sample() for _ in range(8)]
@@ -96,9 +96,8 @@ def test_predict_single_and_batched_observations_agree_and_stay_in_bounds():
     assert np.all(np.abs(batched) <= 1.0) and np.all(batched[:, 3] == 0.0)
 
 
-def test_predict_target_ahead_and_left_moves_forward_and_left():
-    follower = LearnedFollower()
-    obs = {
+def _ahead_left_observation() -> dict[str, np.ndarray]:
+    return {
         "target_pos_rel_m": np.array([6.0, 4.0, -16.0], np.float32),
         "target_vel_mps": np.zeros(3, np.float32),
         "drone_vel_mps": np.zeros(3, np.float32),
@@ -108,8 +107,41 @@ def test_predict_target_ahead_and_left_moves_forward_and_left():
         "time_lost_s": np.array([0.0], np.float32),
         "imu": np.array([0.0, 0.0, 9.81, 0.0, 0.0, 0.0], np.float32),
     }
-    action, _ = follower.predict(obs)
+
+
+def test_predict_target_ahead_and_left_moves_forward_and_left():
+    action, _ = LearnedFollower(soft_start_s=0.0).predict(_ahead_left_observation())
     assert action[0] > 0.0 and action[1] > 0.0
+
+
+def test_soft_start_ramps_the_action_from_zero_over_soft_start_s():
+    obs = _ahead_left_observation()
+    full, _ = LearnedFollower(soft_start_s=0.0).predict(obs)
+    follower = LearnedFollower(soft_start_s=0.5)  # 15 frames at 30 Hz
+    actions = [follower.predict(obs, episode_start=np.array([k == 0]))[0] for k in range(20)]
+    for k, action in enumerate(actions):
+        np.testing.assert_allclose(action, full * min(1.0, k / 15), rtol=1e-6, atol=1e-7)
+    assert np.all(actions[0] == 0.0)
+
+
+def test_soft_start_restarts_per_env_on_episode_start_and_on_reset():
+    obs = _ahead_left_observation()
+    batch = {key: np.stack([value, value]) for key, value in obs.items()}
+    full, _ = LearnedFollower(soft_start_s=0.0).predict(obs)
+    follower = LearnedFollower(soft_start_s=0.5)
+    for k in range(20):
+        follower.predict(batch, episode_start=np.array([k == 0, k == 0]))
+    restarted, _ = follower.predict(batch, episode_start=np.array([False, True]))  # env 1 starts a new episode
+    np.testing.assert_allclose(restarted[0], full, rtol=1e-6)
+    assert np.all(restarted[1] == 0.0)
+    follower.reset()
+    assert np.all(follower.predict(batch)[0] == 0.0)  # after reset() the next call is every episode's first
+
+
+@pytest.mark.parametrize("bad", [-0.1, float("nan"), "1"])
+def test_bad_soft_start_raises_value_error_naming_it(bad):
+    with pytest.raises(ValueError, match="soft_start_s"):
+        LearnedFollower(soft_start_s=bad)
 
 
 def test_shipped_policy_keeps_target_in_view_full_oracle_episode():
