@@ -20,6 +20,8 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
+from trade_gym.provenance import git_commit
+
 HERE = Path(__file__).resolve().parents[1]
 
 # One measurement: oracle mode, scripted follower, the CPU time spent inside env.step only. The probe runs on each
@@ -57,14 +59,6 @@ def _measure(tree: Path, scene: str, steps: int, camera_px: int = 0) -> dict:
     return json.loads(out.strip().splitlines()[-1])
 
 
-def _commit(tree: Path) -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=tree, capture_output=True,
-                              text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
 def median_ratio(base: list[float], new: list[float]) -> tuple[float, float, float]:
     """Median of the base tree's and of this tree's measurements, and new / base of the medians."""
     base_median, new_median = statistics.median(base), statistics.median(new)
@@ -73,7 +67,7 @@ def median_ratio(base: list[float], new: list[float]) -> tuple[float, float, flo
 
 def run_meta(base: Path) -> dict:
     """What a before/after benchmark records beside its numbers: both commits, date, CPU, cores, load."""
-    return dict(base_commit=_commit(base), new_commit=_commit(HERE), date=datetime.now(timezone.utc).isoformat(),
+    return dict(base_commit=git_commit(base), new_commit=git_commit(HERE), date=datetime.now(timezone.utc).isoformat(),
                 cpu=platform.processor() or platform.machine(), cores=os.cpu_count(),
                 load_average_1min_at_end=round(os.getloadavg()[0], 2))
 

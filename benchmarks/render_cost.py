@@ -21,7 +21,6 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -30,6 +29,7 @@ import numpy as np
 import pybullet as p
 
 from trade_gym.env import TradeFollowEnv
+from trade_gym.provenance import git_commit
 from trade.geometry import Pose
 
 PIXEL_SIDES_PX = (64, 128, 256, 512)
@@ -98,14 +98,6 @@ def measure_scene(scene: str, seed: int, frames: int, rounds: int) -> dict:
             "render_ms_samples": {k: [round(x, 2) for x in v] for k, v in samples.items()}}
 
 
-def _commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                              check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="+", default=["desert", "city", "mountain"])
@@ -117,7 +109,7 @@ def main() -> None:
     load_start = os.getloadavg()[0]
     result = {"scenes": {s: measure_scene(s, args.seed, args.frames, args.rounds) for s in args.scenes},
               "renderer": "TinyRenderer", "seed": args.seed, "frames": args.frames, "rounds": args.rounds,
-              "meta": {"commit": _commit(), "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+              "meta": {"commit": git_commit(), "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                        "cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
                        "python": platform.python_version(),
                        "load_average_1min": [round(load_start, 2), round(os.getloadavg()[0], 2)]}}

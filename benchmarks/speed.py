@@ -10,7 +10,6 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -22,6 +21,7 @@ from step_clock import StepClock  # benchmarks/ is on sys.path when this script 
 from agents import ScriptedFollower
 from trade_gym.bench.policies import HoverPolicy
 from trade_gym.env import TradeFollowEnv
+from trade_gym.provenance import git_commit
 from trade_gym.rollout import fly_episode
 
 
@@ -46,14 +46,6 @@ def _render_ms(env: TradeFollowEnv, n_frames: int, seed: int) -> float:
     for _ in range(n_frames):
         env.camera.render(T)
     return (time.perf_counter() - start) / n_frames * 1e3
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                              check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def main() -> None:
@@ -86,7 +78,7 @@ def main() -> None:
         "render_share_of_rendering_step": round(render_ms / (1e3 / render_sps), 3),
         "oracle_over_rendering_speed_ratio": round(oracle_sps / render_sps, 1),
         "meta": {
-            "commit": _commit(),
+            "commit": git_commit(),
             "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "cpu": platform.processor() or platform.machine(),
             "python": platform.python_version(),
