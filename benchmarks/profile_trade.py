@@ -1,7 +1,9 @@
 """Milliseconds per frame of each TRADE stage, measured in the env beside the render time.
 
-Usage: python benchmarks/profile_trade.py [--scene desert] [--steps 300] [--camera-size 256] [--json OUT]
-The scripted follower flies; the stack runs on every rendered frame (pose_source="gt").
+Usage: python benchmarks/profile_trade.py [--scene desert] [--steps 300] [--camera-size 256] [--no-ground-mask]
+       [--json OUT]
+The scripted follower flies; the stack runs on every rendered frame (pose_source="gt"). Full TRADE (the env's
+default, ground mask on) unless --no-ground-mask.
 """
 
 from __future__ import annotations
@@ -25,8 +27,8 @@ from trade_gym.rollout import fly_episode
 PERCENTILES = (50, 90, 99)
 
 
-def profile(scene: str, steps: int, camera_size: int, seed: int) -> dict:
-    env = TradeFollowEnv(scene=scene, perception="trade", camera_size=camera_size)
+def profile(scene: str, steps: int, camera_size: int, seed: int, ground_mask: bool = True) -> dict:
+    env = TradeFollowEnv(scene=scene, perception="trade", camera_size=camera_size, ground_mask=ground_mask)
     render_ms: list[float] = []
     original_render = env.camera.render
 
@@ -55,7 +57,8 @@ def profile(scene: str, steps: int, camera_size: int, seed: int) -> dict:
     table["stack_total_ms"] = _summary(stack)
     table["render_ms"] = _summary(render_ms[1:])  # the first render belongs to reset
     table["env_step_ms"] = _summary(step_ms)
-    return {"scene": scene, "camera_size": camera_size, "steps": len(step_ms), "ms_per_frame": table,
+    return {"scene": scene, "camera_size": camera_size, "ground_mask": ground_mask, "steps": len(step_ms),
+            "ms_per_frame": table,
             "load_average_1min_at_end": round(os.getloadavg()[0], 2)}
 
 
@@ -72,9 +75,10 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--camera-size", type=int, default=256)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-ground-mask", action="store_true", help="TRADE without the ground mask")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()
-    result = profile(args.scene, args.steps, args.camera_size, args.seed)
+    result = profile(args.scene, args.steps, args.camera_size, args.seed, ground_mask=not args.no_ground_mask)
     print(f"{'stage':<16}{'mean':>8}{'p50':>8}{'p90':>8}{'p99':>8}   [ms per frame]")
     for name, s in result["ms_per_frame"].items():
         print(f"{name:<16}{s['mean']:>8.2f}{s['p50']:>8.2f}{s['p90']:>8.2f}{s['p99']:>8.2f}")

@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from trade.anchor_klt import refine_from_first_images
 from trade.geometry import CameraIntrinsics, Pose
 from trade.types import BBox
 
@@ -257,17 +258,14 @@ class RoiFeatureTracker:
     def _refine_against_anchors(self, gray: npt.NDArray[np.uint8], found: BoolArray) -> None:
         """KLT from each track's first image and pixel to `gray`, started at the chained position (no pyramid:
         the start is within a pixel or two); refinements within anchor_max_shift_px replace the chained pixel."""
-        for birth in np.unique(self._birth[found]).tolist():
-            idx = np.flatnonzero(found & (self._birth == birth))
-            start = self._px[idx].reshape(-1, 1, 2)
-            first = self._first_px[idx].astype(np.float32).reshape(-1, 1, 2)
-            refined, status, _ = cv2.calcOpticalFlowPyrLK(
-                self._anchors[birth], gray, first, start, **self._anchor_lk, flags=cv2.OPTFLOW_USE_INITIAL_FLOW
-            )
-            refined = refined.reshape(-1, 2)
-            shift_px = np.linalg.norm(refined - self._px[idx], axis=1)
-            take = status.ravel().astype(bool) & (shift_px <= self.config.anchor_max_shift_px)
-            self._px[idx[take]] = refined[take]
+        idx = np.flatnonzero(found)
+        if not len(idx):
+            return
+        refined, status = refine_from_first_images(self._anchors, self._birth[idx], self._first_px[idx], gray,
+                                                   self._px[idx], self._anchor_lk)
+        shift_px = np.linalg.norm(refined - self._px[idx], axis=1)
+        take = status & (shift_px <= self.config.anchor_max_shift_px)
+        self._px[idx[take]] = refined[take]
 
     def _keep_anchors(self) -> None:
         """Keep the first images of live tracks only, adding this frame's if tracks started in it."""

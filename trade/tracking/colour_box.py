@@ -248,7 +248,7 @@ class ColourBoxRefiner:
             raise RuntimeError("ColourBoxRefiner.init must be called first")
         n = self.config.bins_per_channel
         q = (image_rgb.astype(np.uint16) * n) >> _BITS_PER_CHANNEL  # bin = value * n // 256
-        return self._lut_u8[(q[..., 0] * n + q[..., 1]) * n + q[..., 2]]
+        return np.take(self._lut_u8, (q[..., 0] * n + q[..., 1]) * n + q[..., 2])  # = lut[flat bin], faster
 
     def likelihood_map(self, image_rgb: ImageRGB) -> npt.NDArray[np.float32]:
         """(h, w) P(target | colour) in [0, 1] (steps of 1/255) of an (h, w, 3) uint8 RGB image or crop."""

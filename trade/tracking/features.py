@@ -93,7 +93,7 @@ def orientation_histograms(gray: FloatArray32, config: FeatureConfig) -> FloatAr
     magnitude, angle = cv2.cartToPolar(gx, gy)
     # bin coordinate b = (theta mod pi) * n_bins / pi, theta in [0, 2 pi); bin centres at integers
     position = angle.reshape(-1) * np.float32(n_bins / np.pi)
-    position -= np.float32(n_bins) * (position >= n_bins)
+    np.subtract(position, np.float32(n_bins), out=position, where=position >= n_bins)
     lower = position.astype(np.int32)  # floor, since position >= 0
     upper_weight = position - lower
     wrap = _bin_wrap(n_bins)
@@ -102,8 +102,9 @@ def orientation_histograms(gray: FloatArray32, config: FeatureConfig) -> FloatAr
     h_cells, w_cells = height // config.cell_size_px, width // config.cell_size_px
     n_values = n_patches * h_cells * w_cells * n_bins
     # h[cell, bin] = sum |g| (1 - w) over pixels with floor(b) = bin + sum |g| w over floor(b) + 1 = bin
-    hist = np.bincount(cell + wrap[lower], weights=mag * (1.0 - upper_weight), minlength=n_values)
-    hist += np.bincount(cell + wrap[lower + 1], weights=mag * upper_weight, minlength=n_values)
+    # np.take: the same look-up as wrap[lower], without fancy indexing's per-call overhead
+    hist = np.bincount(cell + np.take(wrap, lower), weights=mag * (1.0 - upper_weight), minlength=n_values)
+    hist += np.bincount(cell + np.take(wrap, lower + 1), weights=mag * upper_weight, minlength=n_values)
     return hist.reshape(n_patches, h_cells, w_cells, n_bins).astype(np.float32)
 
 

@@ -66,17 +66,12 @@ def sample_windows(
     n_win, out_w, out_h = len(windows), int(out[0]), int(out[1])
     u = np.arange(out_w) - (out[0] - 1) / 2
     v = np.arange(out_h) - (out[1] - 1) / 2
-    map_x = (center[0] + u[None, :] * steps[:, :1] - offset[0]) / src_step[0]  # (S, out_w)
-    map_y = (center[1] + v[None, :] * steps[:, 1:] - offset[1]) / src_step[1]  # (S, out_h)
+    # computed in float64 per row / column, cast to the float32 maps cv2.remap takes, then broadcast
+    map_x = ((center[0] + u[None, :] * steps[:, :1] - offset[0]) / src_step[0]).astype(np.float32)  # (S, out_w)
+    map_y = ((center[1] + v[None, :] * steps[:, 1:] - offset[1]) / src_step[1]).astype(np.float32)  # (S, out_h)
     map_x = np.broadcast_to(map_x[:, None, :], (n_win, out_h, out_w)).reshape(n_win * out_h, out_w)
     map_y = np.broadcast_to(map_y[:, :, None], (n_win, out_h, out_w)).reshape(n_win * out_h, out_w)
-    sampled = cv2.remap(
-        src,
-        map_x.astype(np.float32),
-        map_y.astype(np.float32),
-        interpolation=_INTERPOLATION,
-        borderMode=cv2.BORDER_REPLICATE,
-    )
+    sampled = cv2.remap(src, map_x, map_y, interpolation=_INTERPOLATION, borderMode=cv2.BORDER_REPLICATE)
     return sampled.reshape(n_win, out_h, out_w, 3)
 
 
