@@ -14,6 +14,7 @@ import numpy.typing as npt
 import pybullet as p
 
 from trade.geometry import CameraIntrinsics, Pose
+from trade_gym.sim.mesh_files import draw_meshes_from_files
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -134,7 +135,8 @@ class Camera:
     """Renders the pybullet scene of `client_id` from a pose; the projection is fixed at construction.
 
     With renderer "egl" the EGL plugin is loaded into the client here (it then serves every render of
-    that client and survives resetSimulation); call `close()` to unload it.
+    that client and survives resetSimulation) and the client's meshes are built from OBJ files from now on
+    (`trade_gym.sim.mesh_files`: the plugin draws no in-memory mesh); call `close()` to unload it.
     """
 
     def __init__(self, client_id: int, config: CameraConfig | None = None) -> None:
@@ -145,6 +147,8 @@ class Camera:
         self.T_body_cam = Pose(mount_rotation(cfg.pitch_deg), np.asarray(cfg.mount_offset_body_m))
         self._projection = projection_matrix(self.intrinsics, cfg.near_m, cfg.far_m, cfg.renderer)
         self._plugin_id = _load_egl_plugin(self.client_id) if cfg.renderer == "egl" else None
+        if self._plugin_id is not None:
+            draw_meshes_from_files(self.client_id, True)
         self._renderer_flag = _RENDERER_FLAGS[cfg.renderer]
 
     def pose(self, R_world_body: npt.ArrayLike, position_m: npt.ArrayLike) -> Pose:
@@ -178,6 +182,7 @@ class Camera:
         if self._plugin_id is not None:
             if p.isConnected(physicsClientId=self.client_id):
                 p.unloadPlugin(self._plugin_id, physicsClientId=self.client_id)
+            draw_meshes_from_files(self.client_id, False)
             self._plugin_id = None
 
 
