@@ -50,7 +50,8 @@ class EnvConfig:
     camera_fov_deg: float = 110.0  # vertical = horizontal field of view [deg]
     camera_pitch_deg: float = 90.0  # optical axis below the body x axis [deg]; 90 = straight down
     # pybullet renderer: "tiny" (TinyRenderer, pip-only) or "egl" (the EGL plugin, where an EGL driver exists; Mesa's
-    # software llvmpipe counts). Images agree within the tolerances of tests/trade_gym/test_egl.py, not bytewise.
+    # software llvmpipe counts). Images agree within the tolerances of tests/trade_gym/test_egl.py, not bytewise. EGL
+    # holds on to ~4 MB per world never built before in the process (`trade_gym.sim.camera.Camera`).
     renderer: str = "tiny"
     target_speed_mps: float | None = None  # None: the scene's default
     episode_duration_s: float = 30.0  # truncation horizon [s]
