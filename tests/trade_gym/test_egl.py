@@ -142,3 +142,10 @@ def test_check_env_passes_with_egl():
             check_env(env.unwrapped)
     finally:
         env.close()
+
+
+def test_bench_meta_names_the_renderers_the_runs_used():
+    from trade_gym.bench.results import collect_meta
+
+    assert collect_meta("quick", [], 1, 1, 1.0)["renderer"] == "TinyRenderer"
+    assert collect_meta("quick", [], 1, 2, 1.0, renderers=["egl", "tiny", "egl"])["renderer"] == "EGL, TinyRenderer"
