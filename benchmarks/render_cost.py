@@ -11,8 +11,12 @@ For each scene, on one world (development world 0 unless --seed), the camera is 
 
 Measurements are interleaved over `--rounds` rounds and the medians reported, so a change of the host's load
 hits every row alike. Removing bodies happens in this script's own client only (the env never does that).
+With `--renderers tiny egl` every row is measured with each renderer in the same rounds (rows of a renderer other
+than tiny are prefixed with its name, e.g. "egl 256 px"). Each measurement first renders WARMUP_RENDERS frames
+untimed (an EGL client's first two frames took ~0.3 s and ~0.2 s here, later ones ~50 ms).
 
 Usage: python benchmarks/render_cost.py [--scenes desert city mountain] [--frames 20] [--rounds 3] [--json OUT]
+       [--renderers tiny egl]
 """
 
 from __future__ import annotations
@@ -28,26 +32,31 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 
+from trade_gym.bench.results import RENDERER_NAMES
 from trade_gym.env import TradeFollowEnv
 from trade_gym.provenance import git_commit
+from trade_gym.sim.camera import RENDERERS
 from trade.geometry import Pose
 
 PIXEL_SIDES_PX = (64, 128, 256, 512)
 BODY_SIDE_PX = 256
+WARMUP_RENDERS = 2  # per measurement, not timed
 # a camera turned by pi about its own x axis looks up instead of down
 TURN_UP = np.diag([1.0, -1.0, -1.0])
 STATIC_ROLES_BUT_TERRAIN = ("boulders", "buildings", "road", "lake")
 
 
 def _render_ms(env: TradeFollowEnv, pose: Pose, frames: int) -> float:
+    for _ in range(WARMUP_RENDERS):  # untimed: slow first frames (EGL), see the docstring
+        env.camera.render(pose)
     start = time.perf_counter()
     for _ in range(frames):
         env.camera.render(pose)
     return (time.perf_counter() - start) / frames * 1e3
 
 
-def _env(scene: str, side_px: int, seed: int) -> tuple[TradeFollowEnv, Pose]:
-    env = TradeFollowEnv(scene=scene, perception="oracle", camera_size=side_px)
+def _env(scene: str, side_px: int, seed: int, renderer: str) -> tuple[TradeFollowEnv, Pose]:
+    env = TradeFollowEnv(scene=scene, perception="oracle", camera_size=side_px, renderer=renderer)
     env.reset(seed=seed)
     return env, env._true_camera_pose()
 
@@ -79,23 +88,30 @@ def _body_rows(env: TradeFollowEnv, pose: Pose, frames: int) -> dict[str, float]
     return rows
 
 
-def measure_scene(scene: str, seed: int, frames: int, rounds: int) -> dict:
+def measure_scene(scene: str, seed: int, frames: int, rounds: int, renderers: tuple[str, ...] = ("tiny",)) -> dict:
     samples: dict[str, list[float]] = {}
     counts: dict = {}
     for _ in range(rounds):
-        for side in PIXEL_SIDES_PX:
-            env, pose = _env(scene, side, seed)
-            samples.setdefault(f"{side} px", []).append(_render_ms(env, pose, frames))
-            env.close()
-        env, pose = _env(scene, BODY_SIDE_PX, seed)
-        counts = _counts(env)
-        up = Pose(pose.R @ TURN_UP, pose.t)
-        samples.setdefault("looking at the sky", []).append(_render_ms(env, up, frames))
-        for name, ms in _body_rows(env, pose, frames).items():
-            samples.setdefault(name, []).append(ms)
-        env.close()
+        for renderer in renderers:
+            counts = _measure_round(scene, seed, frames, renderer, samples)
     return {"counts": counts, "render_ms_median": {k: round(float(np.median(v)), 2) for k, v in samples.items()},
             "render_ms_samples": {k: [round(x, 2) for x in v] for k, v in samples.items()}}
+
+
+def _measure_round(scene: str, seed: int, frames: int, renderer: str, samples: dict[str, list[float]]) -> dict:
+    prefix = "" if renderer == "tiny" else f"{renderer} "
+    for side in PIXEL_SIDES_PX:
+        env, pose = _env(scene, side, seed, renderer)
+        samples.setdefault(f"{prefix}{side} px", []).append(_render_ms(env, pose, frames))
+        env.close()
+    env, pose = _env(scene, BODY_SIDE_PX, seed, renderer)
+    counts = _counts(env)
+    up = Pose(pose.R @ TURN_UP, pose.t)
+    samples.setdefault(f"{prefix}looking at the sky", []).append(_render_ms(env, up, frames))
+    for name, ms in _body_rows(env, pose, frames).items():
+        samples.setdefault(prefix + name, []).append(ms)
+    env.close()
+    return counts
 
 
 def main() -> None:
@@ -105,10 +121,13 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=20, help="renders per measurement")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--renderers", nargs="+", choices=RENDERERS, default=["tiny"])
     args = parser.parse_args()
     load_start = os.getloadavg()[0]
-    result = {"scenes": {s: measure_scene(s, args.seed, args.frames, args.rounds) for s in args.scenes},
-              "renderer": "TinyRenderer", "seed": args.seed, "frames": args.frames, "rounds": args.rounds,
+    renderers = tuple(args.renderers)
+    result = {"scenes": {s: measure_scene(s, args.seed, args.frames, args.rounds, renderers) for s in args.scenes},
+              "renderer": ", ".join(RENDERER_NAMES[r] for r in renderers), "seed": args.seed, "frames": args.frames,
+              "rounds": args.rounds,
               "meta": {"commit": git_commit(), "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                        "cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
                        "python": platform.python_version(),

@@ -13,6 +13,7 @@ from trade.validation import (check_choice, check_non_negative, check_positive, 
 from trade_gym.perception.oracle import OracleConfig
 from trade_gym.reward import RewardConfig
 from trade_gym.sim.appearance import APPEARANCE_MODES
+from trade_gym.sim.camera import RENDERERS, CameraConfig
 from trade_gym.sim.pose_source import VioConfig
 from trade_gym.sim.quadrotor import QuadrotorConfig
 from trade_gym.sim.scenes import DECOY_TIERS
@@ -48,6 +49,10 @@ class EnvConfig:
     camera_size: int = 256  # square image side [px]
     camera_fov_deg: float = 110.0  # vertical = horizontal field of view [deg]
     camera_pitch_deg: float = 90.0  # optical axis below the body x axis [deg]; 90 = straight down
+    # pybullet renderer: "tiny" (TinyRenderer, pip-only) or "egl" (the EGL plugin, where an EGL driver exists; Mesa's
+    # software llvmpipe counts). Images agree within the tolerances of tests/trade_gym/test_egl.py, not bytewise. EGL
+    # holds on to ~4 MB per world never built before in the process (`trade_gym.sim.camera.Camera`).
+    renderer: str = "tiny"
     target_speed_mps: float | None = None  # None: the scene's default
     episode_duration_s: float = 30.0  # truncation horizon [s]
     lost_timeout_s: float = 3.0  # terminate when the target is out of view this long [s]
@@ -106,6 +111,7 @@ class EnvConfig:
         check_choice("target_motion", self.target_motion, TARGET_MOTIONS)
         check_choice("appearance", self.appearance, APPEARANCE_MODES)
         check_choice("render_mode", self.render_mode, RENDER_MODES)
+        check_choice("renderer", self.renderer, RENDERERS)
         _check_latency(self.perception_latency, self.perception_latency_ms)
         require(is_int_at_least(self.camera_size, MIN_CAMERA_SIZE_PX, numpy_ints=False), "camera_size",
                 self.camera_size, f"an integer >= {MIN_CAMERA_SIZE_PX} [px]")
@@ -132,6 +138,11 @@ class EnvConfig:
     def oracle(self) -> OracleConfig:
         """The oracle's noise model: OracleConfig's fields from the `oracle_<field>` arguments."""
         return OracleConfig(**{f.name: getattr(self, ORACLE_PREFIX + f.name) for f in fields(OracleConfig)})
+
+    def camera_config(self) -> CameraConfig:
+        """The camera these arguments describe (square image, field of view, pitch, renderer)."""
+        return CameraConfig(width_px=self.camera_size, height_px=self.camera_size, fov_deg=self.camera_fov_deg,
+                            pitch_deg=self.camera_pitch_deg, renderer=self.renderer)
 
     @property
     def physics_steps_per_frame(self) -> int:

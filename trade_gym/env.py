@@ -30,7 +30,7 @@ from trade_gym.perception.factory import make_perception
 from trade_gym.reward import RewardInputs, compute_reward
 from trade_gym.scoring import EnvFrame, ScoredEstimate, env_info, follow_band, reward_inputs, score_estimate
 from trade_gym.sim.appearance import EpisodeLook, appearance_stream
-from trade_gym.sim.camera import Camera, CameraConfig, CameraFrame
+from trade_gym.sim.camera import Camera, CameraFrame
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import make_pose_source
 from trade_gym.sim.quadrotor import Quadrotor
@@ -122,7 +122,7 @@ class TradeFollowEnv(gym.Env):
     `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches,
     `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0), and
     the components' configs `reward=`, `quadrotor=` and `vio=` (each the config or a mapping of its fields), `decoys`,
-    `target_motion`, `appearance`.
+    `target_motion`, `appearance`, `renderer`.
 
     ## Version History
     - v0: initial release.
@@ -142,6 +142,7 @@ class TradeFollowEnv(gym.Env):
       `TargetMotion`; the reset's `info["target_motion"]` holds the mode and what was drawn for it.
     - v0, issue 19: `appearance=` ("fixed", the default: every image as before; "randomized": light, ground, vehicle
       paint, haze and camera effects per reset, `trade_gym.sim.appearance`); the reset's info gains `appearance`.
+    - v0, issue 22: `renderer=` ("tiny", the default and as before: TinyRenderer; "egl": pybullet's EGL plugin).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -150,8 +151,7 @@ class TradeFollowEnv(gym.Env):
         self.config = EnvConfig(**kwargs)
         self.render_mode = self.config.render_mode
         self.quad_config = self.config.quadrotor
-        self.camera_config = CameraConfig(width_px=self.config.camera_size, height_px=self.config.camera_size,
-                                          fov_deg=self.config.camera_fov_deg, pitch_deg=self.config.camera_pitch_deg)
+        self.camera_config = self.config.camera_config()
         self.imu_config = ImuConfig(noise=self.config.imu_noise)
         self.action_space = action_space()
         self.observation_space = observation_space()

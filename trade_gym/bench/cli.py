@@ -379,7 +379,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         executor.close()
     wall_s = time.perf_counter() - start
     write_outputs(args, results, collect_meta(args.suite, argv, jobs, len(results), wall_s, args.backend,
-                                              args.ray_address))
+                                              args.ray_address, [r.spec.switch_value("renderer") for r in results]))
     status = 0
     if failed := [r for r in results if r.error]:
         print(f"{PROG}: {len(failed)} of {len(results)} runs failed (see results.md)", file=sys.stderr)

@@ -29,6 +29,7 @@ SCHEMA_FILE = "results.schema.json"
 PACKAGES = ("numpy", "pybullet", "gymnasium", "opencv-python-headless", "onnxruntime", "stable-baselines3",
             "filterpy", "matplotlib", "ray", "trade-gym")
 RENDERER = "TinyRenderer"  # pybullet DIRECT mode's software renderer (the env's default)
+RENDERER_NAMES = {"tiny": RENDERER, "egl": "EGL"}  # by EnvConfig.renderer ("egl": pybullet's eglRenderer plugin)
 SERIES_FILE = "series.npz"  # every run's per-frame series, keyed "<run_id>/<field>" (see RunSeries)
 
 
@@ -43,9 +44,11 @@ def package_versions() -> dict[str, str]:
 
 
 def collect_meta(suite: str | None, argv: Sequence[str], jobs: int, n_runs: int, wall_s: float,
-                 backend: str = "local", ray_address: str | None = None) -> dict[str, Any]:
+                 backend: str = "local", ray_address: str | None = None,
+                 renderers: Sequence[str] = ("tiny",)) -> dict[str, Any]:
     """Where and when the numbers were measured (the repository is found from this file's location); `jobs` is
-    how many runs executed at once (local worker processes, or the Ray cluster's CPUs)."""
+    how many runs executed at once (local worker processes, or the Ray cluster's CPUs); `renderers` the runs'
+    `renderer` arguments (meta names each one used, e.g. "TinyRenderer" or "EGL, TinyRenderer")."""
     return {
         "suite": suite,
         "argv": list(argv),
@@ -57,7 +60,7 @@ def collect_meta(suite: str | None, argv: Sequence[str], jobs: int, n_runs: int,
         "python": platform.python_version(),
         "platform": platform.platform(),
         "packages": package_versions(),
-        "renderer": RENDERER,
+        "renderer": ", ".join(sorted({RENDERER_NAMES[r] for r in renderers})) or RENDERER,
         "jobs": jobs,
         "backend": backend,
         "ray_address": ray_address,

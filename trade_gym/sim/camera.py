@@ -14,6 +14,7 @@ import numpy.typing as npt
 import pybullet as p
 
 from trade.geometry import CameraIntrinsics, Pose
+from trade_gym.sim.mesh_files import draw_meshes_from_files
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -134,7 +135,12 @@ class Camera:
     """Renders the pybullet scene of `client_id` from a pose; the projection is fixed at construction.
 
     With renderer "egl" the EGL plugin is loaded into the client here (it then serves every render of
-    that client and survives resetSimulation); call `close()` to unload it.
+    that client and survives resetSimulation) and the client's meshes are built from OBJ files from now on
+    (`trade_gym.sim.mesh_files`: the plugin draws no in-memory mesh); call `close()` to unload it. Memory, measured
+    over 30 env resets at 64 px (RSS, desert): TinyRenderer ~0 MB per reset; EGL +0.3-0.5 MB per reset of one world
+    (world_seed fixed) and +4 MB per world never built before in the process (the plugin's own cache of the OBJ files
+    it read; it was +16 MB before Bullet's cache was turned off here). Unloading the plugin before resetSimulation and
+    reloading it after is no way out: loading it again into a client segfaults (pybullet 3.2.7).
     """
 
     def __init__(self, client_id: int, config: CameraConfig | None = None) -> None:
@@ -145,6 +151,10 @@ class Camera:
         self.T_body_cam = Pose(mount_rotation(cfg.pitch_deg), np.asarray(cfg.mount_offset_body_m))
         self._projection = projection_matrix(self.intrinsics, cfg.near_m, cfg.far_m, cfg.renderer)
         self._plugin_id = _load_egl_plugin(self.client_id) if cfg.renderer == "egl" else None
+        if self._plugin_id is not None:
+            draw_meshes_from_files(self.client_id, True)
+            # Bullet's OBJ cache (process-wide) would keep every world's meshes: 15 -> 4 MB RSS per new desert world
+            p.setPhysicsEngineParameter(enableFileCaching=0, physicsClientId=self.client_id)
         self._renderer_flag = _RENDERER_FLAGS[cfg.renderer]
 
     def pose(self, R_world_body: npt.ArrayLike, position_m: npt.ArrayLike) -> Pose:
@@ -178,6 +188,7 @@ class Camera:
         if self._plugin_id is not None:
             if p.isConnected(physicsClientId=self.client_id):
                 p.unloadPlugin(self._plugin_id, physicsClientId=self.client_id)
+            draw_meshes_from_files(self.client_id, False)
             self._plugin_id = None
 
 

@@ -14,6 +14,7 @@ import numpy.typing as npt
 import pybullet as p
 
 from trade_gym.sim.bullet_lists import bullet_list
+from trade_gym.sim.mesh_files import mesh_visual_shape
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -50,14 +51,7 @@ class Mesh:
 
     def create_visual_shape(self, client_id: int, rgba: tuple[float, float, float, float] | None = None) -> int:
         """Textured visual shape; with `rgba`, a uniformly coloured one without UVs."""
-        if rgba is not None:
-            return p.createVisualShape(p.GEOM_MESH, vertices=bullet_list("vertices", self.vertices),
-                                       indices=bullet_list("indices", self.indices),
-                                       normals=bullet_list("normals", self.normals), rgbaColor=list(rgba),
-                                       physicsClientId=client_id)
-        return p.createVisualShape(p.GEOM_MESH, vertices=bullet_list("vertices", self.vertices),
-                                   indices=bullet_list("indices", self.indices), uvs=bullet_list("uvs", self.uvs),
-                                   normals=bullet_list("normals", self.normals), physicsClientId=client_id)
+        return mesh_visual_shape(client_id, self.vertices, self.indices, self.uvs, self.normals, rgba)
 
     def create_collision_shape(self, client_id: int) -> int:
         """Concave triangle-mesh collision shape (BVH; static bodies only), exactly the drawn surface."""
@@ -144,10 +138,8 @@ def create_terrain_visual(client_id: int, vertices_m: FloatArray, uvs: FloatArra
         kept = tris[~np.all(drop_vertex.ravel()[tris], axis=1)]
         tris = np.zeros_like(tris)
         tris[: len(kept)] = kept
-    return p.createVisualShape(p.GEOM_MESH, vertices=bullet_list("vertices", vertices_m.reshape(-1, 3)),
-                               indices=bullet_list("indices", tris.ravel()),
-                               uvs=bullet_list("uvs", uvs.reshape(-1, 2)),
-                               normals=bullet_list("normals", normals.reshape(-1, 3)), physicsClientId=client_id)
+    return mesh_visual_shape(client_id, vertices_m.reshape(-1, 3), tris.ravel(), uvs.reshape(-1, 2),
+                             normals.reshape(-1, 3))
 
 
 def building_meshes(boxes_lo: FloatArray, boxes_hi: FloatArray, facade_period_m: float,

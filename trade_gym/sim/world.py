@@ -22,6 +22,7 @@ from trade_gym.sim.bullet_lists import bullet_list
 from trade_gym.sim.culling import ViewCuller
 from trade_gym.sim.evasive import EvasiveMotion
 from trade_gym.sim.layout import SceneLayout, parked
+from trade_gym.sim.mesh_files import remove_mesh_files
 from trade_gym.sim.meshes import (
     TEXTURE_PERIOD_M, Mesh, building_meshes, create_terrain_visual, grid_uvs, placed_meshes, polygon_mesh, rock_mesh,
     strip_mesh, texture_path,
@@ -351,4 +352,5 @@ def build_world(client_id: int, scene: str, rng: np.random.Generator, target_spe
     target_half = vehicle_model(spec.target_kind).half_extents_m
     target = spawn(spec.target_kind, target_motion.build(layout, target_half, rng))
     decoys = tuple(spawn(spec.decoy_kind, m) for m in layout.decoys)
+    remove_mesh_files(client_id)  # an EGL client's OBJ files, read as the bodies were created
     return World(client_id, layout, target, decoys, roles, culler)
