@@ -63,7 +63,7 @@ def test_export_onnx_actions_match_sb3_within_tolerance_on_env_observations(algo
     model = random_model(algo, seed=1, **kwargs)
     path = tmp_path / "policy.onnx"
     digest = export_onnx(model, path)
-    follower = LearnedFollower(path, digest)
+    follower = LearnedFollower(path, digest, soft_start_s=0.0)  # the exported policy's own actions, no soft start
     observations = env_observations
     batch = {key: np.stack([o[key] for o in observations]) for key in observations[0]}
     features, _ = flatten_observation(batch)
