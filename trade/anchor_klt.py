@@ -44,15 +44,12 @@ def _mosaic(images: Mapping[int, ImageGray], image_key: IntArray, origins: IntAr
             shape_hw: tuple[int, int]) -> tuple[ImageGray, IntArray]:
     """(H, W) reference mosaic with point k's tile at slot k (row-major grid of `side` px tiles), and the
     (N, 2) (x, y) [px] whole-pixel shift from each point's first image to the mosaic."""
-    rows, columns = shape_hw[0] // side, shape_hw[1] // side
+    columns = shape_hw[1] // side
     slot = np.arange(len(origins))
     slot_px = side * np.stack([slot % columns, slot // columns], axis=1)
-    tiles = np.zeros((rows * columns, side, side), np.uint8)
-    for k, (key, (x0, y0)) in enumerate(zip(image_key.tolist(), origins.tolist())):
-        tiles[k] = images[key][y0 : y0 + side, x0 : x0 + side]
     mosaic = np.zeros(shape_hw, np.uint8)
-    mosaic[: rows * side, : columns * side] = tiles.reshape(rows, columns, side, side).transpose(0, 2, 1, 3).reshape(
-        rows * side, columns * side)
+    for key, (x0, y0), (sx, sy) in zip(image_key.tolist(), origins.tolist(), slot_px.tolist()):
+        mosaic[sy : sy + side, sx : sx + side] = images[key][y0 : y0 + side, x0 : x0 + side]
     return mosaic, slot_px - origins
 
 

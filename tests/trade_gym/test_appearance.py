@@ -5,13 +5,11 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import warnings
 
 import gymnasium as gym
 import numpy as np
 import pybullet as p
 import pytest
-from gymnasium.utils.env_checker import check_env
 
 import trade_gym  # noqa: F401  (registers TradeFollow-v0)
 from trade.geometry import CameraIntrinsics
@@ -21,6 +19,7 @@ from trade_gym.sim.camera_effects import MOTION_BLUR_MAX_FRACTION, CameraEffects
 from trade_gym.sim.scenes import SCENES, get_scene
 from trade_gym.sim.texture_variants import ground_variant, palette_variant
 from trade_gym.sim.vehicles import PALETTE_CELL_PX, PALETTE_RGB
+from tests.trade_gym.env_checks import check_env_strict
 
 FRAMES = dict(perception="oracle", render_oracle_frames=True, camera_size=64)
 ACTION = np.array([0.3, -0.2, 0.1, 0.4], dtype=np.float32)
@@ -138,9 +137,7 @@ def test_ground_truth_and_every_other_draw_are_the_same_under_randomized_appeara
 def test_check_env_passes_with_randomized_appearance():
     env = gym.make("TradeFollow-v0", appearance="randomized", camera_size=64)
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            check_env(env.unwrapped)
+        check_env_strict(env)
     finally:
         env.close()
 

@@ -12,6 +12,7 @@ from trade_gym.env import TradeFollowEnv
 from trade_gym.rollout import run_episode
 from trade_gym.sim.scenes import SCENES
 from trade_gym.sim.world import DecoyTier, build_world
+from tests.trade_gym.env_checks import check_env_strict
 
 SEED = 3
 FOLLOW_FRAMES = 150
@@ -99,14 +100,8 @@ def test_no_decoys_and_bad_tier():
 
 @pytest.mark.parametrize("tier", ["none", "parked"])
 def test_check_env_passes_with_each_decoy_tier(tier):
-    import warnings
-
-    from gymnasium.utils.env_checker import check_env
-
     env = TradeFollowEnv(scene="desert", perception="oracle", decoys=tier, episode_duration_s=1.0)
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            check_env(env, skip_render_check=True)
+        check_env_strict(env, skip_render_check=True)
     finally:
         env.close()

@@ -5,16 +5,15 @@ from __future__ import annotations
 
 import functools
 import importlib.util
-import warnings
 
 import gymnasium as gym
 import numpy as np
 import pybullet as p
 import pytest
-from gymnasium.utils.env_checker import check_env
 
 import trade_gym  # noqa: F401  (registers TradeFollow-v0)
 from trade_gym.env import TradeFollowEnv
+from tests.trade_gym.env_checks import check_env_strict
 
 SIDE_PX = 64
 SEED = 3
@@ -137,9 +136,7 @@ def test_check_env_passes_with_egl():
     env = gym.make("TradeFollow-v0", renderer="egl", camera_size=SIDE_PX, perception="oracle",
                    render_oracle_frames=True)
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            check_env(env.unwrapped)
+        check_env_strict(env)
     finally:
         env.close()
 

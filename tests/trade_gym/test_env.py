@@ -12,6 +12,7 @@ from gymnasium.utils.env_checker import check_env
 
 import trade_gym  # noqa: F401  (registers TradeFollow-v0)
 from trade_gym.env import TradeFollowEnv
+from tests.trade_gym.env_checks import check_env_strict
 
 SMALL = dict(camera_size=64)
 INFO_KEYS = (
@@ -223,9 +224,7 @@ def test_check_env_passes_for_the_image_perceptions_with_missing_depths_as_none(
     None (NaN would differ from itself)."""
     env = gym.make("TradeFollow-v0", scene="desert", perception=perception, **SMALL)
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            check_env(env.unwrapped)
+        check_env_strict(env)
         _, info = env.reset(seed=0)
         assert info["ground_depth_est"] is None or math.isfinite(info["ground_depth_est"])
     finally:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 import pybullet as p
@@ -18,6 +17,7 @@ from trade_gym.sim.target_motion import (
     STOP_GO_RAMP_S, STOP_GO_SPEED_FACTORS, STOP_GO_STOP_S, TargetMotion, draw_stop_and_go,
 )
 from trade_gym.sim.world import DecoyTier, World, build_world, make_layout
+from tests.trade_gym.env_checks import check_env_strict
 
 SEED = 4
 FRAME_S = 1.0 / 30.0
@@ -250,13 +250,9 @@ def test_bad_target_motion_raises_value_error_naming_it(make):
 
 @pytest.mark.parametrize("mode", ["stop_and_go", "evasive"])
 def test_check_env_passes_with_each_target_motion(mode):
-    from gymnasium.utils.env_checker import check_env
-
     env = TradeFollowEnv(scene="desert", perception="oracle", target_motion=mode, camera_size=64,
                          episode_duration_s=1.0)
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            check_env(env, skip_render_check=True)
+        check_env_strict(env, skip_render_check=True)
     finally:
         env.close()

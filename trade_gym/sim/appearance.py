@@ -148,12 +148,7 @@ def apply_to_world(world: World, appearance: Appearance) -> None:
     texture = p.loadTexture(str(path), physicsClientId=cid)
     for body in world.body_ids_by_role["terrain"]:
         p.changeVisualShape(body, -1, textureUniqueId=texture, physicsClientId=cid)
-    tint = [*a.ground_tint_rgb, 1.0]
-    if world.culler is not None:  # it owns the tiles' colour (a hidden tile keeps zero alpha until shown)
-        world.culler.set_colour(tint)
-    else:
-        for body in world.body_ids_by_role["terrain"]:
-            p.changeVisualShape(body, -1, rgbaColor=tint, physicsClientId=cid)
+    world.culler.set_colour([*a.ground_tint_rgb, 1.0])  # it owns the tiles' colour (hidden ones keep zero alpha)
     path = variant_path("vehicle_palette", f"h{a.vehicle_hue_shift_deg:g}",
                         lambda rgb: palette_variant(rgb, VEHICLE_PAINT_CELLS, a.vehicle_hue_shift_deg))
     palette = p.loadTexture(str(path), physicsClientId=cid)

@@ -34,9 +34,19 @@ def boxes_in_view(lo_m: npt.ArrayLike, hi_m: npt.ArrayLike, T_world_cam: Pose, K
                   near_m: float, far_m: float, margin_px: float = FRUSTUM_MARGIN_PX) -> npt.NDArray[np.bool_]:
     """(N,) False where the world-axis box [lo_m, hi_m] (N, 3) lies wholly outside the frustum of a pinhole camera
     (x right, y down, z forward) at `T_world_cam` with image K between `near_m` and `far_m`; True otherwise."""
-    lo, hi = np.asarray(lo_m, dtype=np.float64), np.asarray(hi_m, dtype=np.float64)
-    corners = lo[:, None, :] + (hi - lo)[:, None, :] * _CORNER_SIGNS[None]  # (N, 8, 3) world
-    c = (corners - T_world_cam.t) @ T_world_cam.R  # (N, 8, 3) camera frame
+    return corners_in_view(box_corners(lo_m, hi_m), T_world_cam, K, near_m, far_m, margin_px)
+
+
+def box_corners(lo_m: npt.ArrayLike, hi_m: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """(N, 8, 3) corners of the world-axis boxes [lo_m, hi_m] (N, 3)."""
+    lo, hi = np.asarray(lo_m, dtype=np.float64).reshape(-1, 3), np.asarray(hi_m, dtype=np.float64).reshape(-1, 3)
+    return lo[:, None, :] + (hi - lo)[:, None, :] * _CORNER_SIGNS[None]
+
+
+def corners_in_view(corners_m: npt.NDArray[np.float64], T_world_cam: Pose, K: CameraIntrinsics, near_m: float,
+                    far_m: float, margin_px: float = FRUSTUM_MARGIN_PX) -> npt.NDArray[np.bool_]:
+    """`boxes_in_view` of boxes given by their (N, 8, 3) world corners (`box_corners`)."""
+    c = (corners_m - T_world_cam.t) @ T_world_cam.R  # (N, 8, 3) camera frame
     x, y, z = c[..., 0], c[..., 1], c[..., 2]
     u_lo, v_lo = -margin_px, -margin_px
     u_hi, v_hi = K.width_px + margin_px, K.height_px + margin_px
@@ -60,12 +70,12 @@ class ViewCuller:
                  rgba: npt.ArrayLike) -> None:
         self.client_id = int(client_id)
         self.body_ids = tuple(int(b) for b in body_ids)
-        self.lo_m = np.asarray(lo_m, dtype=np.float64).reshape(-1, 3)
-        self.hi_m = np.asarray(hi_m, dtype=np.float64).reshape(-1, 3)
+        lo, hi = np.asarray(lo_m, dtype=np.float64).reshape(-1, 3), np.asarray(hi_m, dtype=np.float64).reshape(-1, 3)
         self._rgba = np.array(rgba, dtype=np.float64).reshape(-1, 4)
-        if not (len(self.body_ids) == len(self.lo_m) == len(self.hi_m) == len(self._rgba)):
+        if not (len(self.body_ids) == len(lo) == len(hi) == len(self._rgba)):
             raise ValueError(f"ViewCuller needs one box and colour per body, got {len(self.body_ids)} bodies, "
-                             f"{len(self.lo_m)} / {len(self.hi_m)} boxes and {len(self._rgba)} colours")
+                             f"{len(lo)} / {len(hi)} boxes and {len(self._rgba)} colours")
+        self._corners_m = box_corners(lo, hi)  # static bodies: their corners once
         self.shown = np.ones(len(self.body_ids), dtype=bool)
 
     def set_colour(self, rgba: npt.ArrayLike) -> None:
@@ -76,7 +86,7 @@ class ViewCuller:
 
     def update(self, T_world_cam: Pose, K: CameraIntrinsics, near_m: float, far_m: float) -> int:
         """Show the bodies that can be in view of this camera, hide the rest; returns how many are shown."""
-        want = boxes_in_view(self.lo_m, self.hi_m, T_world_cam, K, near_m, far_m)
+        want = corners_in_view(self._corners_m, T_world_cam, K, near_m, far_m)
         for i in np.flatnonzero(want != self.shown):
             self._apply(i, self._rgba[i] if want[i] else (*self._rgba[i, :3], 0.0))
         self.shown = want

@@ -95,14 +95,14 @@ def _terrain_tiles(cid: int, layout: SceneLayout, texture_id: int,
                    float(TEXTURE_PERIOD_M[layout.spec.ground_texture]))
     normals = hf.vertex_normals().reshape(ny, nx, 3)
     drop = layout.lake.normalised_radius(gx, gy) <= 1.0 if layout.lake is not None else None
+    base_position = tuple(origin.tolist())
     bodies, lo, hi = [], [], []
     for r0, r1 in itertools.pairwise(_tile_edges(ny - 1, tiles_per_side)):
         for c0, c1 in itertools.pairwise(_tile_edges(nx - 1, tiles_per_side)):
             rows, cols = slice(r0, r1 + 1), slice(c0, c1 + 1)
             visual = create_terrain_visual(cid, vertices[rows, cols], uvs[rows, cols], normals[rows, cols],
                                            None if drop is None else drop[rows, cols])
-            bodies.append(_static_body(cid, collision if not bodies else -1, visual, tuple(origin.tolist()),
-                                       texture_id))
+            bodies.append(_static_body(cid, collision if not bodies else -1, visual, base_position, texture_id))
             heights = hf.heights_m[rows, cols]
             lo.append((hf.x_m[c0], hf.y_m[r0], float(heights.min())))
             hi.append((hf.x_m[c1], hf.y_m[r1], float(heights.max())))
@@ -153,12 +153,12 @@ class World:
     Attributes: `spec`, `layout` (everything generated), `terrain` (Heightfield), `target` and `decoys`
     (Vehicle), `body_ids_by_role` (terrain (its tiles), boulders (all rocks in one body), buildings, road, lake),
     `static_body_ids` (a frozenset of all of those; road and lake have no collision shape, the terrain's first tile
-    carries a GEOM_HEIGHTFIELD matching `terrain`) and `culler` (`ViewCuller` of the terrain tiles, or None:
-    call `prepare_render` before each render).
+    carries a GEOM_HEIGHTFIELD matching `terrain`) and `culler` (`ViewCuller` of the terrain tiles: call
+    `prepare_render` before each render).
     """
 
     def __init__(self, client_id: int, layout: SceneLayout, target: Vehicle, decoys: tuple[Vehicle, ...],
-                 body_ids_by_role: dict[str, tuple[int, ...]], culler: ViewCuller | None = None) -> None:
+                 body_ids_by_role: dict[str, tuple[int, ...]], culler: ViewCuller) -> None:
         self.client_id = client_id
         self.layout = layout
         self.spec: SceneSpec = layout.spec
@@ -204,8 +204,7 @@ class World:
 
     def prepare_render(self, T_world_cam: Pose, K: CameraIntrinsics, near_m: float, far_m: float) -> None:
         """Leave the terrain tiles this camera cannot see out of its next render (`ViewCuller.update`)."""
-        if self.culler is not None:
-            self.culler.update(T_world_cam, K, near_m, far_m)
+        self.culler.update(T_world_cam, K, near_m, far_m)
 
     def place_vehicle_bodies(self) -> None:
         """Move the vehicles' pybullet bodies to their poses at the last `update` (call before rendering)."""
