@@ -53,6 +53,11 @@ class ScaleConfig:
         return np.arange(self.n_scales) - (self.n_scales - 1) / 2
 
 
+def _power(spectrum: npt.NDArray[np.complex64]) -> npt.NDArray[np.float32]:
+    """(n_scales,) sum_d |X_d|^2 of an (n_scales, d) complex64 spectrum, float32."""
+    return np.einsum("kd,kd->k", spectrum.real, spectrum.real) + np.einsum("kd,kd->k", spectrum.imag, spectrum.imag)
+
+
 class ScaleFilter:
     """1-D correlation filter over a pyramid of box-sized samples; features are flattened per scale."""
 
@@ -61,14 +66,15 @@ class ScaleFilter:
         self.features = features
         k = config.exponents
         self._factors = config.scale_step**k
-        self._window = np.hanning(config.n_scales)[:, None]
+        # the model lives in single precision, like the features it is learnt from
+        self._window = np.hanning(config.n_scales)[:, None].astype(np.float32)
         sigma = config.sigma_factor * np.sqrt(config.n_scales)
         # label g_k = exp(-k^2 / (2 sigma^2)), peak at the middle sample (scale 1)
-        self._label_f = np.fft.fft(np.exp(-(k**2) / (2.0 * sigma**2)))[:, None]
+        self._label_f = np.fft.fft(np.exp(-(k**2) / (2.0 * sigma**2)))[:, None].astype(np.complex64)
         self._model_wh: tuple[int, int] | None = None
 
     def _spectrum(self, image_rgb: ImageRGB, center_px: FloatArray, box_wh_px: FloatArray) -> npt.NDArray:
-        """(n_scales, d) FFT over scales of the Hann-weighted flattened features of each scaled sample."""
+        """(n_scales, d) complex64 FFT over scales of the Hann-weighted flattened features of each scaled sample."""
         if self._model_wh is None:
             raise RuntimeError("ScaleFilter.init must be called first")
         windows = self._factors[:, None] * np.asarray(box_wh_px, dtype=np.float64)[None, :]
@@ -88,20 +94,21 @@ class ScaleFilter:
         spectrum = self._spectrum(image_rgb, center_px, box)
         # A = G conj(X) per feature dimension, B = sum_d |X_d|^2
         self._num = self._label_f * np.conj(spectrum)
-        self._den = np.sum(spectrum.real**2 + spectrum.imag**2, axis=1)
+        self._den = _power(spectrum)
 
     def estimate(self, image_rgb: ImageRGB, center_px: FloatArray, box_wh_px: FloatArray) -> float:
         """Size factor of the target at `center_px` relative to `box_wh_px`, refined between scale steps."""
         spectrum = self._spectrum(image_rgb, center_px, box_wh_px)
         # r_k = IFFT( sum_d A_d Z_d / (B + lambda) )
-        resp = np.fft.ifft(np.sum(self._num * spectrum, axis=1) / (self._den + self.config.regularisation)).real
+        resp_f = np.einsum("kd,kd->k", self._num, spectrum) / (self._den + np.float32(self.config.regularisation))
+        resp = np.fft.ifft(resp_f).real
         best = int(np.argmax(resp))
         exponent = self.config.exponents[best] + parabola_vertex_offset(resp, best)
         return float(self.config.scale_step**exponent)
 
     def update(self, image_rgb: ImageRGB, center_px: FloatArray, box_wh_px: FloatArray) -> None:
         """A <- (1 - eta) A + eta G conj(X); B <- (1 - eta) B + eta sum_d |X_d|^2."""
-        eta = self.config.learning_rate
+        eta = np.float32(self.config.learning_rate)
         spectrum = self._spectrum(image_rgb, center_px, box_wh_px)
-        self._num = (1.0 - eta) * self._num + eta * (self._label_f * np.conj(spectrum))
-        self._den = (1.0 - eta) * self._den + eta * np.sum(spectrum.real**2 + spectrum.imag**2, axis=1)
+        self._num = (1 - eta) * self._num + eta * (self._label_f * np.conj(spectrum))
+        self._den = (1 - eta) * self._den + eta * _power(spectrum)
