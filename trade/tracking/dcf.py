@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
+import scipy.fft
 
 from trade.tracking.features import FeatureConfig, extract_features
 from trade.tracking.peaks import ResponseMap, refine_peak
@@ -124,7 +125,7 @@ class DcfTracker:
         _check_image(image_rgb)
         patch = sample_windows(image_rgb, center_px, window_wh_px, self._template_wh)[0]
         features = extract_features(patch, self.config.features).transpose(2, 0, 1)  # (C, h, w)
-        return np.fft.rfft2(features * self._cos_window)
+        return scipy.fft.rfft2(features * self._cos_window)
 
     def response(self, image_rgb: ImageRGB, search_center_px: npt.ArrayLike, with_scale: bool = True) -> ResponseMap:
         """Score map of the window (padding x current box) centred on `search_center_px` (x, y) [px].
@@ -139,9 +140,9 @@ class DcfTracker:
         spectrum = self._spectrum(image_rgb, center, window)
         # r = IFFT( sum_l A_l Z_l / (B + lambda) ), peak at the target's displacement (circular)
         resp_f = np.einsum("lij,lij->ij", self._num, spectrum) / (self._den + np.float32(cfg.regularisation))
-        scores = np.fft.irfft2(resp_f, s=(self._cells_wh[1], self._cells_wh[0]))
+        scores = scipy.fft.irfft2(resp_f, s=(self._cells_wh[1], self._cells_wh[0]))  # float32
         resp = ResponseMap(
-            scores=np.fft.fftshift(scores).astype(np.float32, copy=False),  # float32 already with numpy >= 2
+            scores=np.fft.fftshift(scores),
             scale=1.0,
             origin_px=center,
             px_per_cell=window / np.array(self._cells_wh),

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+import scipy.fft
 
 from trade.tracking.features import FeatureConfig, extract_features
 from trade.tracking.peaks import parabola_vertex_offset
@@ -82,7 +83,7 @@ class ScaleFilter:
         samples = sample_windows(image_rgb, center_px, windows, self._model_wh)
         samples = blur_batch(samples, self.config.sample_blur_sigma_px)
         feats = extract_features(samples, self.features)
-        return np.fft.fft(feats.reshape(self.config.n_scales, -1) * self._window, axis=0)
+        return scipy.fft.fft(feats.reshape(self.config.n_scales, -1) * self._window, axis=0)
 
     def init(self, image_rgb: ImageRGB, center_px: FloatArray, box_wh_px: FloatArray) -> None:
         """Fix the sample size (box aspect, area <= model_max_area_px) and train on this frame."""
@@ -101,7 +102,7 @@ class ScaleFilter:
         spectrum = self._spectrum(image_rgb, center_px, box_wh_px)
         # r_k = IFFT( sum_d A_d Z_d / (B + lambda) )
         resp_f = np.einsum("kd,kd->k", self._num, spectrum) / (self._den + np.float32(self.config.regularisation))
-        resp = np.fft.ifft(resp_f).real
+        resp = scipy.fft.ifft(resp_f).real
         best = int(np.argmax(resp))
         exponent = self.config.exponents[best] + parabola_vertex_offset(resp, best)
         return float(self.config.scale_step**exponent)
