@@ -133,8 +133,8 @@ def extract_features(patches_rgb: npt.NDArray[np.uint8], config: FeatureConfig) 
     """Features of one RGB patch (H, W, 3) or of a batch (N, H, W, 3), uint8.
 
     Trailing rows/columns beyond a whole cell are dropped. Returns (h, w, C) or (N, h, w, C) float32
-    with h = H // c, w = W // c, C = n_bins + 3: normalised orientation histograms, then Lab colour
-    averaged over each cell, centred to [-0.5, 0.5] and scaled by `colour_weight`.
+    with h = H // c, w = W // c, C = n_bins + 3: normalised orientation histograms, then the Lab colour of
+    each cell's mean RGB, centred to [-0.5, 0.5] and scaled by `colour_weight`.
     """
     single = patches_rgb.ndim == 3
     batch = patches_rgb[None] if single else patches_rgb
@@ -149,9 +149,10 @@ def extract_features(patches_rgb: npt.NDArray[np.uint8], config: FeatureConfig) 
     stacked = np.ascontiguousarray(batch[:, :height, :width]).reshape(n_patches * height, width, 3)
     gray = np.multiply(cv2.cvtColor(stacked, cv2.COLOR_RGB2GRAY), np.float32(1.0 / _UINT8_MAX), dtype=np.float32)
     hog = normalise_histograms(orientation_histograms(gray.reshape(n_patches, height, width), config), config)
-    lab = cv2.cvtColor(stacked, cv2.COLOR_RGB2LAB)
-    # cell mean of each Lab channel (INTER_AREA with an integer factor is an exact box average)
-    lab_cells = cv2.resize(lab, (w_cells, n_patches * h_cells), interpolation=cv2.INTER_AREA)
+    # Lab of each cell's mean colour (INTER_AREA with an integer factor is an exact box average): a 16th of
+    # the conversions of averaging per-pixel Lab, which it equals on cells of one colour
+    rgb_cells = cv2.resize(stacked, (w_cells, n_patches * h_cells), interpolation=cv2.INTER_AREA)
+    lab_cells = cv2.cvtColor(rgb_cells, cv2.COLOR_RGB2LAB)
     # (Lab / 255 - 1/2) * colour_weight
     colour = np.multiply(lab_cells, np.float32(1.0 / _UINT8_MAX), dtype=np.float32)
     np.subtract(colour, np.float32(_COLOUR_CENTRE), out=colour)
