@@ -31,6 +31,9 @@ class ScaleConfig:
     sample_blur_sigma_px: float = 1.5  # Gaussian blur of each resized sample [sample px], >= 0
     regularisation: float = 1e-2  # lambda in A / (B + lambda)
     learning_rate: float = 0.025  # eta of the running-average model update
+    # The update learns from the samples of the same frame's estimate (no new pyramid) when it is at the same
+    # centre and the box changed size by at most this many scale steps since (0: only an unchanged box)
+    update_reuse_max_steps: float = 0.5
 
     def __post_init__(self) -> None:
         checks = {
@@ -42,6 +45,7 @@ class ScaleConfig:
             "sample_blur_sigma_px": self.sample_blur_sigma_px >= 0,
             "regularisation": self.regularisation > 0,
             "learning_rate": 0 < self.learning_rate <= 1,
+            "update_reuse_max_steps": self.update_reuse_max_steps >= 0,
         }
         for name, ok in checks.items():
             value = getattr(self, name)
@@ -73,6 +77,8 @@ class ScaleFilter:
         # label g_k = exp(-k^2 / (2 sigma^2)), peak at the middle sample (scale 1)
         self._label_f = np.fft.fft(np.exp(-(k**2) / (2.0 * sigma**2)))[:, None].astype(np.complex64)
         self._model_wh: tuple[int, int] | None = None
+        # the last estimate's image, centre (x, y) [px], box (w, h) [px] and spectrum, for the update to reuse
+        self._estimated: tuple[ImageRGB, FloatArray, FloatArray, npt.NDArray] | None = None
 
     def _spectrum(self, image_rgb: ImageRGB, center_px: FloatArray, box_wh_px: FloatArray) -> npt.NDArray:
         """(n_scales, d) complex64 FFT over scales of the Hann-weighted flattened features of each scaled sample."""
@@ -92,6 +98,7 @@ class ScaleFilter:
         shrink = min(1.0, float(np.sqrt(cfg.model_max_area_px / box.prod())))
         cells = np.maximum(np.floor(box * shrink / cell), cfg.min_model_cells).astype(int)
         self._model_wh = (int(cells[0]) * cell, int(cells[1]) * cell)
+        self._estimated = None
         spectrum = self._spectrum(image_rgb, center_px, box)
         # A = G conj(X) per feature dimension, B = sum_d |X_d|^2
         self._num = self._label_f * np.conj(spectrum)
@@ -100,6 +107,8 @@ class ScaleFilter:
     def estimate(self, image_rgb: ImageRGB, center_px: FloatArray, box_wh_px: FloatArray) -> float:
         """Size factor of the target at `center_px` relative to `box_wh_px`, refined between scale steps."""
         spectrum = self._spectrum(image_rgb, center_px, box_wh_px)
+        self._estimated = (image_rgb, np.array(center_px, dtype=np.float64), np.array(box_wh_px, dtype=np.float64),
+                           spectrum)
         # r_k = IFFT( sum_d A_d Z_d / (B + lambda) )
         resp_f = np.einsum("kd,kd->k", self._num, spectrum) / (self._den + np.float32(self.config.regularisation))
         resp = scipy.fft.ifft(resp_f).real
@@ -108,8 +117,27 @@ class ScaleFilter:
         return float(self.config.scale_step**exponent)
 
     def update(self, image_rgb: ImageRGB, center_px: FloatArray, box_wh_px: FloatArray) -> None:
-        """A <- (1 - eta) A + eta G conj(X); B <- (1 - eta) B + eta sum_d |X_d|^2."""
+        """A <- (1 - eta) A + eta G conj(X); B <- (1 - eta) B + eta sum_d |X_d|^2.
+
+        X is the spectrum of the same frame's last estimate when that was at this centre and the box has
+        changed size since by at most `update_reuse_max_steps` scale steps (the image must not have been
+        modified in place in between); else the pyramid is sampled anew.
+        """
         eta = np.float32(self.config.learning_rate)
-        spectrum = self._spectrum(image_rgb, center_px, box_wh_px)
+        spectrum = self._reusable_spectrum(image_rgb, center_px, box_wh_px)
+        if spectrum is None:
+            spectrum = self._spectrum(image_rgb, center_px, box_wh_px)
         self._num = (1 - eta) * self._num + eta * (self._label_f * np.conj(spectrum))
         self._den = (1 - eta) * self._den + eta * _power(spectrum)
+
+    def _reusable_spectrum(self, image_rgb: ImageRGB, center_px: FloatArray,
+                           box_wh_px: FloatArray) -> npt.NDArray | None:
+        """The last estimate's spectrum if it was of this image at this centre with a box within
+        `update_reuse_max_steps` scale steps of this one (per side), else None; used at most once."""
+        estimated, self._estimated = self._estimated, None
+        if estimated is None:
+            return None
+        image, center, box_wh, spectrum = estimated
+        steps = np.abs(np.log(np.asarray(box_wh_px, dtype=np.float64) / box_wh)) / np.log(self.config.scale_step)
+        same_place = image is image_rgb and np.array_equal(center, center_px)
+        return spectrum if same_place and bool(np.all(steps <= self.config.update_reuse_max_steps)) else None
