@@ -249,3 +249,55 @@ def test_scale_update_reusing_the_estimate_learns_the_same_model_for_an_unchange
 def test_scale_config_negative_reuse_tolerance_raises_naming_field() -> None:
     with pytest.raises(ValueError, match="update_reuse_max_steps"):
         ScaleConfig(update_reuse_max_steps=-0.5)
+
+
+def _counting_dcf(image: np.ndarray, box: BBox) -> tuple[DcfTracker, list[int]]:
+    """A DcfTracker (no scale filter) trained on `box`, and a list that grows by one per template it samples."""
+    tracker = DcfTracker(DcfConfig(estimate_scale=False))
+    tracker.init(image, box)
+    calls: list[int] = []
+    sample = tracker._spectrum
+
+    def counting(*args):
+        calls.append(1)
+        return sample(*args)
+
+    tracker._spectrum = counting
+    return tracker, calls
+
+
+def test_dcf_update_reuses_a_response_window_of_the_same_frame_within_half_a_cell_once() -> None:
+    background, target = _scene(seed=9, target_side_px=24)
+    image, box = _paste(background, target, 100, 100)
+    tracker, calls = _counting_dcf(image, box)
+    pitch = tracker.config.padding * np.array([box.w_px, box.h_px]) / np.array(tracker._cells_wh)  # px per cell
+    other_frame = image.copy()
+    cases = [  # (image updated on, box centre offset from the response window [cells], new templates sampled)
+        (image, 0.0, 0), (image, 0.4, 0), (image, 0.6, 1), (other_frame, 0.0, 1)]
+    for frame, offset_cells, sampled in cases:
+        tracker.response(image, box.center, with_scale=False)
+        before = len(calls)
+        tracker.update(frame, BBox.from_center(*(box.center + offset_cells * pitch), box.w_px, box.h_px))
+        assert len(calls) - before == sampled
+    before = len(calls)
+    tracker.update(image, box)  # the frame's windows serve one update only
+    assert len(calls) - before == 1
+
+
+def test_dcf_update_reusing_a_window_centred_on_the_box_learns_the_same_model() -> None:
+    background, target = _scene(seed=10, target_side_px=24)
+    image, box = _paste(background, target, 90, 110)
+    moved, _ = _paste(background, target, 93, 108)
+    reusing, _ = _counting_dcf(image, box)
+    fresh, _ = _counting_dcf(image, box)
+    reusing.response(moved, box.center, with_scale=False)
+    reusing.update(moved, box)
+    fresh.update(moved, box)
+    np.testing.assert_array_equal(reusing._num, fresh._num)
+    np.testing.assert_array_equal(reusing._den, fresh._den)
+
+
+@pytest.mark.parametrize("field", ["update_reuse_max_offset_cells", "update_reuse_max_size_change"])
+def test_dcf_config_negative_reuse_limit_raises_naming_field(field: str) -> None:
+    with pytest.raises(ValueError, match=field):
+        DcfConfig(**{field: -0.1})
