@@ -5,6 +5,8 @@ Owns the window geometry (pixel centres at integer coordinates, OpenCV), border 
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import cv2
 import numpy as np
 import numpy.typing as npt
@@ -20,6 +22,8 @@ _ROI_MARGIN_PX = 2
 _INTERPOLATION = cv2.INTER_LINEAR
 # Gaussian kernels are cut at this many standard deviations.
 _BLUR_TRUNCATE_SIGMAS = 3.0
+# The separable filter's kernel along the axis it leaves alone.
+_IDENTITY_KERNEL = np.ones((1, 1))
 
 
 def _shrunk_roi(
@@ -75,6 +79,14 @@ def sample_windows(
     return sampled
 
 
+@lru_cache(maxsize=8)
+def _gaussian_kernel(sigma_px: float) -> npt.NDArray[np.float64]:
+    """(k, 1) Gaussian kernel of `sigma_px`, cut at _BLUR_TRUNCATE_SIGMAS (read-only)."""
+    kernel = cv2.getGaussianKernel(2 * int(np.ceil(_BLUR_TRUNCATE_SIGMAS * sigma_px)) + 1, sigma_px)
+    kernel.setflags(write=False)
+    return kernel
+
+
 def blur_batch(samples: npt.NDArray[np.uint8], sigma_px: float) -> npt.NDArray[np.uint8]:
     """Gaussian blur of each of (S, h, w, 3) samples with its own replicated border (no bleeding).
 
@@ -83,8 +95,7 @@ def blur_batch(samples: npt.NDArray[np.uint8], sigma_px: float) -> npt.NDArray[n
     if sigma_px <= 0:
         return samples
     n_samples, height, width, _ = samples.shape
-    kernel = cv2.getGaussianKernel(2 * int(np.ceil(_BLUR_TRUNCATE_SIGMAS * sigma_px)) + 1, sigma_px)
-    identity = np.ones((1, 1))
+    kernel, identity = _gaussian_kernel(float(sigma_px)), _IDENTITY_KERNEL
     along_x = cv2.sepFilter2D(
         samples.reshape(n_samples * height, width, 3), -1, kernel, identity, borderType=cv2.BORDER_REPLICATE
     )
