@@ -33,12 +33,6 @@ class DcfConfig:
     learning_rate: float = 0.02  # eta of the running-average model update
     estimate_scale: bool = True  # run the DSST scale filter (else the box keeps its size)
     min_box_px: float = 4.0  # lower bound on committed box width and height
-    # The update learns from a response window of the same frame (no new template) when the box centre lies
-    # within this many cells of that window's centre along each axis, with the label moved to the box centre
-    # (0: only a window centred on the box) ...
-    update_reuse_max_offset_cells: float = 0.5
-    # ... and the box size differs from that window's by at most this fraction per side (1.5 %: half a scale step)
-    update_reuse_max_size_change: float = 0.015
     features: FeatureConfig = field(default_factory=FeatureConfig)
     scale: ScaleConfig = field(default_factory=ScaleConfig)
 
@@ -52,8 +46,6 @@ class DcfConfig:
             "regularisation": self.regularisation > 0,
             "learning_rate": 0 < self.learning_rate <= 1,
             "min_box_px": self.min_box_px > 0,
-            "update_reuse_max_offset_cells": self.update_reuse_max_offset_cells >= 0,
-            "update_reuse_max_size_change": self.update_reuse_max_size_change >= 0,
         }
         for name, ok in checks.items():
             value = getattr(self, name)
@@ -95,8 +87,6 @@ class DcfTracker:
         self.config = config if config is not None else DcfConfig()
         self._scale_filter = ScaleFilter(self.config.scale, self.config.features)
         self._box: BBox | None = None
-        # this frame's response windows, (centre (x, y) [px], window (w, h) [px], spectrum), for the update
-        self._frame: tuple[ImageRGB | None, list[tuple[FloatArray, FloatArray, npt.NDArray]]] = (None, [])
 
     @property
     def box(self) -> BBox:
@@ -123,9 +113,6 @@ class DcfTracker:
         sigma_cells = cfg.output_sigma_factor * np.sqrt(cells.prod()) / cfg.padding
         # the model lives in single precision, like the features it is learnt from
         self._label_f = np.fft.rfft2(gaussian_label(shape_hw, sigma_cells)).astype(np.complex64)
-        # frequencies [cycles per cell] of the rfft2 layout along rows and columns
-        self._freq_rc = (np.fft.fftfreq(shape_hw[0])[:, None], np.fft.rfftfreq(shape_hw[1])[None, :])
-        self._frame = (None, [])
         spectrum = self._spectrum(image_rgb, box.center, window)
         # A_l = G conj(F_l), B = sum_l |F_l|^2
         self._num = self._label_f * np.conj(spectrum)
@@ -151,9 +138,6 @@ class DcfTracker:
         center = np.asarray(search_center_px, dtype=np.float64).reshape(2)
         window = cfg.padding * np.array([box.w_px, box.h_px])
         spectrum = self._spectrum(image_rgb, center, window)
-        if self._frame[0] is not image_rgb:
-            self._frame = (image_rgb, [])
-        self._frame[1].append((center, window, spectrum))
         # r = IFFT( sum_l A_l Z_l / (B + lambda) ), peak at the target's displacement (circular)
         resp_f = np.einsum("lij,lij->ij", self._num, spectrum) / (self._den + np.float32(cfg.regularisation))
         scores = scipy.fft.irfft2(resp_f, s=(self._cells_wh[1], self._cells_wh[0]))  # float32
@@ -190,42 +174,13 @@ class DcfTracker:
         return self._box
 
     def update(self, image_rgb: ImageRGB, box: BBox | None = None) -> None:
-        """Running-average update of both filters on the window around `box` (default: the committed box).
-
-        The translation filter learns from this frame's response window nearest to the box when that is
-        within `update_reuse_max_offset_cells` and `update_reuse_max_size_change` (its label G moved to the
-        box centre; the image must not have been modified in place since), else from a window sampled anew.
-        """
+        """Running-average update of both filters on the window around `box` (default: the committed box)."""
         box = self.box if box is None else box
         eta = np.float32(self.config.learning_rate)
         size = np.array([box.w_px, box.h_px])
-        window = self.config.padding * size
-        reused = self._reused_window(image_rgb, box.center, window)
-        spectrum, label_f = reused if reused is not None else (self._spectrum(image_rgb, box.center, window),
-                                                                self._label_f)
+        spectrum = self._spectrum(image_rgb, box.center, self.config.padding * size)
         # A <- (1 - eta) A + eta G conj(F); B <- (1 - eta) B + eta sum_l |F_l|^2
-        self._num = (1 - eta) * self._num + eta * (label_f * np.conj(spectrum))
+        self._num = (1 - eta) * self._num + eta * (self._label_f * np.conj(spectrum))
         self._den = (1 - eta) * self._den + eta * _power(spectrum)
         if self.config.estimate_scale:
             self._scale_filter.update(image_rgb, box.center, size)
-
-    def _reused_window(self, image_rgb: ImageRGB, center_px: FloatArray,
-                       window_wh_px: FloatArray) -> tuple[npt.NDArray, npt.NDArray] | None:
-        """(spectrum, label spectrum) of this frame's response window nearest to `center_px` within the reuse
-        limits, the label Gaussian moved to `center_px` in it; None without one. The frame's windows are used once."""
-        (image, windows), self._frame = self._frame, (None, [])
-        cfg = self.config
-        best: tuple[float, npt.NDArray, FloatArray] | None = None
-        for center, window, spectrum in windows if image is image_rgb else []:
-            if np.any(np.abs(window_wh_px / window - 1.0) > cfg.update_reuse_max_size_change):
-                continue
-            offset_cells = (np.asarray(center_px) - center) / (window / np.array(self._cells_wh))  # (x, y)
-            reach = float(np.abs(offset_cells).max())
-            if reach <= cfg.update_reuse_max_offset_cells and (best is None or reach < best[0]):
-                best = (reach, spectrum, offset_cells)
-        if best is None:
-            return None
-        # g moved by d cells: G(f) exp(-2 pi i f . d), f the (row, col) frequencies in cycles per cell
-        rows, cols = self._freq_rc
-        phase = np.exp(-2j * np.pi * (rows * best[2][1] + cols * best[2][0])).astype(np.complex64)
-        return best[1], self._label_f * phase
