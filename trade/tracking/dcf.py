@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
+import scipy.fft
 
 from trade.tracking.features import FeatureConfig, extract_features
 from trade.tracking.peaks import ResponseMap, refine_peak
@@ -64,6 +65,12 @@ def gaussian_label(shape_hw: tuple[int, int], sigma_cells: float) -> FloatArray:
     return np.exp(-(rows[:, None] ** 2 + cols[None, :] ** 2) / (2.0 * sigma_cells**2))
 
 
+def _power(spectrum: npt.NDArray[np.complex64]) -> npt.NDArray[np.float32]:
+    """sum_l |F_l|^2 over the leading (channel) axis of a complex64 spectrum, float32."""
+    return np.einsum("l...,l...->...", spectrum.real, spectrum.real) + np.einsum(
+        "l...,l...->...", spectrum.imag, spectrum.imag)
+
+
 class DcfTracker:
     """Correlation filter tracker. Per frame the caller does:
 
@@ -104,20 +111,21 @@ class DcfTracker:
         shape_hw = (self._cells_wh[1], self._cells_wh[0])
         self._cos_window = np.outer(np.hanning(shape_hw[0]), np.hanning(shape_hw[1])).astype(np.float32)
         sigma_cells = cfg.output_sigma_factor * np.sqrt(cells.prod()) / cfg.padding
-        self._label_f = np.fft.rfft2(gaussian_label(shape_hw, sigma_cells))
+        # the model lives in single precision, like the features it is learnt from
+        self._label_f = np.fft.rfft2(gaussian_label(shape_hw, sigma_cells)).astype(np.complex64)
         spectrum = self._spectrum(image_rgb, box.center, window)
         # A_l = G conj(F_l), B = sum_l |F_l|^2
         self._num = self._label_f * np.conj(spectrum)
-        self._den = np.sum(spectrum.real**2 + spectrum.imag**2, axis=0)
+        self._den = _power(spectrum)
         if cfg.estimate_scale:
             self._scale_filter.init(image_rgb, box.center, np.array([box.w_px, box.h_px]))
 
     def _spectrum(self, image_rgb: ImageRGB, center_px: FloatArray, window_wh_px: FloatArray) -> npt.NDArray:
-        """(C, h, w // 2 + 1) rfft2 of the cosine-windowed features of one window (w, h) [px]."""
+        """(C, h, w // 2 + 1) complex64 rfft2 of the cosine-windowed features of one window (w, h) [px]."""
         _check_image(image_rgb)
         patch = sample_windows(image_rgb, center_px, window_wh_px, self._template_wh)[0]
         features = extract_features(patch, self.config.features).transpose(2, 0, 1)  # (C, h, w)
-        return np.fft.rfft2(features * self._cos_window)
+        return scipy.fft.rfft2(features * self._cos_window)
 
     def response(self, image_rgb: ImageRGB, search_center_px: npt.ArrayLike, with_scale: bool = True) -> ResponseMap:
         """Score map of the window (padding x current box) centred on `search_center_px` (x, y) [px].
@@ -131,10 +139,10 @@ class DcfTracker:
         window = cfg.padding * np.array([box.w_px, box.h_px])
         spectrum = self._spectrum(image_rgb, center, window)
         # r = IFFT( sum_l A_l Z_l / (B + lambda) ), peak at the target's displacement (circular)
-        resp_f = np.sum(self._num * spectrum, axis=0) / (self._den + cfg.regularisation)
-        scores = np.fft.irfft2(resp_f, s=(self._cells_wh[1], self._cells_wh[0]))
+        resp_f = np.einsum("lij,lij->ij", self._num, spectrum) / (self._den + np.float32(cfg.regularisation))
+        scores = scipy.fft.irfft2(resp_f, s=(self._cells_wh[1], self._cells_wh[0]))  # float32
         resp = ResponseMap(
-            scores=np.fft.fftshift(scores).astype(np.float32),
+            scores=np.fft.fftshift(scores),
             scale=1.0,
             origin_px=center,
             px_per_cell=window / np.array(self._cells_wh),
@@ -168,11 +176,11 @@ class DcfTracker:
     def update(self, image_rgb: ImageRGB, box: BBox | None = None) -> None:
         """Running-average update of both filters on the window around `box` (default: the committed box)."""
         box = self.box if box is None else box
-        eta = self.config.learning_rate
+        eta = np.float32(self.config.learning_rate)
         size = np.array([box.w_px, box.h_px])
         spectrum = self._spectrum(image_rgb, box.center, self.config.padding * size)
         # A <- (1 - eta) A + eta G conj(F); B <- (1 - eta) B + eta sum_l |F_l|^2
-        self._num = (1.0 - eta) * self._num + eta * (self._label_f * np.conj(spectrum))
-        self._den = (1.0 - eta) * self._den + eta * np.sum(spectrum.real**2 + spectrum.imag**2, axis=0)
+        self._num = (1 - eta) * self._num + eta * (self._label_f * np.conj(spectrum))
+        self._den = (1 - eta) * self._den + eta * _power(spectrum)
         if self.config.estimate_scale:
             self._scale_filter.update(image_rgb, box.center, size)

@@ -5,6 +5,8 @@ Owns the window geometry (pixel centres at integer coordinates, OpenCV), border 
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import cv2
 import numpy as np
 import numpy.typing as npt
@@ -20,6 +22,8 @@ _ROI_MARGIN_PX = 2
 _INTERPOLATION = cv2.INTER_LINEAR
 # Gaussian kernels are cut at this many standard deviations.
 _BLUR_TRUNCATE_SIGMAS = 3.0
+# The separable filter's kernel along the axis it leaves alone.
+_IDENTITY_KERNEL = np.ones((1, 1))
 
 
 def _shrunk_roi(
@@ -62,17 +66,25 @@ def sample_windows(
     shrink = int(np.floor(steps.min()))
     if shrink >= ANTIALIAS_MIN_FACTOR:
         src, offset, src_step = _shrunk_roi(image_rgb, center, windows.max(axis=0) / 2, shrink)
-    # src coordinate of template pixel u: (c + (u - (out - 1) / 2) step - offset) / src_step, per axis
-    n_win, out_w, out_h = len(windows), int(out[0]), int(out[1])
-    u = np.arange(out_w) - (out[0] - 1) / 2
-    v = np.arange(out_h) - (out[1] - 1) / 2
-    # computed in float64 per row / column, cast to the float32 maps cv2.remap takes, then broadcast
-    map_x = ((center[0] + u[None, :] * steps[:, :1] - offset[0]) / src_step[0]).astype(np.float32)  # (S, out_w)
-    map_y = ((center[1] + v[None, :] * steps[:, 1:] - offset[1]) / src_step[1]).astype(np.float32)  # (S, out_h)
-    map_x = np.broadcast_to(map_x[:, None, :], (n_win, out_h, out_w)).reshape(n_win * out_h, out_w)
-    map_y = np.broadcast_to(map_y[:, :, None], (n_win, out_h, out_w)).reshape(n_win * out_h, out_w)
-    sampled = cv2.remap(src, map_x, map_y, interpolation=_INTERPOLATION, borderMode=cv2.BORDER_REPLICATE)
-    return sampled.reshape(n_win, out_h, out_w, 3)
+    # src coordinate of template pixel u: (c + (u - (out - 1) / 2) step - offset) / src_step, per axis:
+    # per window the axis-aligned affine map u -> (step / src_step) u + (c - (out - 1) / 2 step - offset) / src_step
+    inverse_maps = np.zeros((len(windows), 2, 3))
+    inverse_maps[:, 0, 0], inverse_maps[:, 1, 1] = (steps / src_step).T
+    inverse_maps[:, :, 2] = (center - (out - 1) / 2 * steps - offset) / src_step
+    out_w, out_h = int(out[0]), int(out[1])
+    sampled = np.empty((len(windows), out_h, out_w, 3), dtype=np.uint8)
+    for inverse_map, dst in zip(inverse_maps, sampled):
+        cv2.warpAffine(src, inverse_map, (out_w, out_h), dst=dst, flags=_INTERPOLATION | cv2.WARP_INVERSE_MAP,
+                       borderMode=cv2.BORDER_REPLICATE)
+    return sampled
+
+
+@lru_cache(maxsize=8)
+def _gaussian_kernel(sigma_px: float) -> npt.NDArray[np.float64]:
+    """(k, 1) Gaussian kernel of `sigma_px`, cut at _BLUR_TRUNCATE_SIGMAS (read-only)."""
+    kernel = cv2.getGaussianKernel(2 * int(np.ceil(_BLUR_TRUNCATE_SIGMAS * sigma_px)) + 1, sigma_px)
+    kernel.setflags(write=False)
+    return kernel
 
 
 def blur_batch(samples: npt.NDArray[np.uint8], sigma_px: float) -> npt.NDArray[np.uint8]:
@@ -83,8 +95,7 @@ def blur_batch(samples: npt.NDArray[np.uint8], sigma_px: float) -> npt.NDArray[n
     if sigma_px <= 0:
         return samples
     n_samples, height, width, _ = samples.shape
-    kernel = cv2.getGaussianKernel(2 * int(np.ceil(_BLUR_TRUNCATE_SIGMAS * sigma_px)) + 1, sigma_px)
-    identity = np.ones((1, 1))
+    kernel, identity = _gaussian_kernel(float(sigma_px)), _IDENTITY_KERNEL
     along_x = cv2.sepFilter2D(
         samples.reshape(n_samples * height, width, 3), -1, kernel, identity, borderType=cv2.BORDER_REPLICATE
     )

@@ -16,6 +16,7 @@ from trade.tracking import (
     sample_windows,
     select_peak,
 )
+from trade.tracking.scale import ScaleConfig, ScaleFilter
 from trade.types import BBox, iou
 
 IMAGE_SIDE_PX = 256
@@ -80,6 +81,21 @@ def test_sample_windows_unit_scale_copies_pixels_and_replicates_border() -> None
     outside = sample_windows(image, np.array([-100.0, 200.0]), np.array([[20.0, 20.0], [90.0, 90.0]]), (8, 8))
     assert outside.shape == (2, 8, 8, 3)
     assert np.all(outside == image[-1, 0])  # beyond the bottom-left corner: the corner pixel
+
+
+def test_sample_windows_of_several_sizes_follow_the_template_geometry_on_a_ramp() -> None:
+    # I(x, y) = x on a 256 px ramp: template pixel (u, v) of window (w, h) must read x = c + (u - (out - 1) / 2) w / out
+    ramp = np.broadcast_to(np.arange(256, dtype=np.uint8)[None, :, None], (256, 256, 3)).copy()
+    ramp_y = np.ascontiguousarray(ramp.transpose(1, 0, 2))
+    center, out = np.array([120.3, 90.7]), (12, 20)
+    windows = np.array([[6.0, 10.0], [9.0, 15.0], [13.5, 22.5]])  # < 2 image px per template px: no pre-shrink
+    steps = windows / np.array(out)
+    expected_x = center[0] + (np.arange(out[0]) - (out[0] - 1) / 2) * steps[:, :1]  # (S, out_w)
+    expected_y = center[1] + (np.arange(out[1]) - (out[1] - 1) / 2) * steps[:, 1:]  # (S, out_h)
+    along_x = sample_windows(ramp, center, windows, out)[..., 0].astype(float)  # (S, out_h, out_w)
+    along_y = sample_windows(ramp_y, center, windows, out)[..., 0].astype(float)
+    np.testing.assert_allclose(along_x, np.broadcast_to(expected_x[:, None, :], along_x.shape), atol=0.55)
+    np.testing.assert_allclose(along_y, np.broadcast_to(expected_y[:, :, None], along_y.shape), atol=0.55)
 
 
 def test_dcf_response_static_shift_peaks_at_displacement() -> None:
@@ -178,3 +194,58 @@ def test_dcf_config_invalid_value_raises_naming_field(field: str, value: float) 
 def test_dcf_tracker_use_before_init_raises() -> None:
     with pytest.raises(RuntimeError, match="init"):
         DcfTracker().response(np.zeros((8, 8, 3), dtype=np.uint8), np.zeros(2))
+
+
+def _counting_scale_filter(config: ScaleConfig, image: np.ndarray, box: BBox) -> tuple[ScaleFilter, list[int]]:
+    """A ScaleFilter trained on `box`, and a list that grows by one each time it samples its pyramid."""
+    scale_filter = ScaleFilter(config, FeatureConfig())
+    scale_filter.init(image, box.center, np.array([box.w_px, box.h_px]))
+    calls: list[int] = []
+    sample = scale_filter._spectrum
+
+    def counting(*args):
+        calls.append(1)
+        return sample(*args)
+
+    scale_filter._spectrum = counting
+    return scale_filter, calls
+
+
+def test_scale_update_reuses_the_same_frames_estimate_at_its_centre_within_half_a_step_once() -> None:
+    background, target = _scene(seed=7, target_side_px=24)
+    image, box = _paste(background, target, 100, 90)
+    size = np.array([box.w_px, box.h_px])
+    scale_filter, calls = _counting_scale_filter(ScaleConfig(), image, box)
+    other_frame = image.copy()  # same pixels, another frame
+    cases = [  # (image, centre offset [px], size factor of the update, pyramids sampled by the update)
+        (image, 0.0, 1.0, 0), (image, 0.0, 1.03**0.4, 0), (image, 0.0, 1.03**0.6, 1),
+        (image, 0.5, 1.0, 1), (other_frame, 0.0, 1.0, 1)]
+    for frame, offset, factor, sampled in cases:
+        scale_filter.estimate(image, box.center, size)
+        before = len(calls)
+        scale_filter.update(frame, box.center + offset, factor * size)
+        assert len(calls) - before == sampled
+    scale_filter.estimate(image, box.center, size)
+    scale_filter.update(image, box.center, size)
+    before = len(calls)
+    scale_filter.update(image, box.center, size)  # the estimate's samples serve one update only
+    assert len(calls) - before == 1
+
+
+def test_scale_update_reusing_the_estimate_learns_the_same_model_for_an_unchanged_box() -> None:
+    background, target = _scene(seed=8, target_side_px=24)
+    image, box = _paste(background, target, 90, 100)
+    moved, _ = _paste(background, target, 92, 101)
+    size = np.array([box.w_px, box.h_px])
+    reusing, _ = _counting_scale_filter(ScaleConfig(), image, box)
+    fresh, _ = _counting_scale_filter(ScaleConfig(), image, box)
+    reusing.estimate(moved, box.center, size)
+    reusing.update(moved, box.center, size)
+    fresh.update(moved, box.center, size)
+    np.testing.assert_array_equal(reusing._num, fresh._num)
+    np.testing.assert_array_equal(reusing._den, fresh._den)
+
+
+def test_scale_config_negative_reuse_tolerance_raises_naming_field() -> None:
+    with pytest.raises(ValueError, match="update_reuse_max_steps"):
+        ScaleConfig(update_reuse_max_steps=-0.5)
