@@ -13,7 +13,7 @@ import scipy.fft
 
 from trade.tracking.features import FeatureConfig, extract_features
 from trade.tracking.peaks import ResponseMap, refine_peak
-from trade.tracking.scale import ScaleConfig, ScaleFilter
+from trade.tracking.scale import ScaleConfig, ScaleFilter, spectral_power
 from trade.tracking.window import sample_windows
 from trade.types import BBox
 
@@ -65,10 +65,7 @@ def gaussian_label(shape_hw: tuple[int, int], sigma_cells: float) -> FloatArray:
     return np.exp(-(rows[:, None] ** 2 + cols[None, :] ** 2) / (2.0 * sigma_cells**2))
 
 
-def _power(spectrum: npt.NDArray[np.complex64]) -> npt.NDArray[np.float32]:
-    """sum_l |F_l|^2 over the leading (channel) axis of a complex64 spectrum, float32."""
-    return np.einsum("l...,l...->...", spectrum.real, spectrum.real) + np.einsum(
-        "l...,l...->...", spectrum.imag, spectrum.imag)
+_CHANNEL_POWER = "l...,l...->..."  # (C, h, w') -> (h, w'): sum over the feature channels
 
 
 class DcfTracker:
@@ -116,7 +113,7 @@ class DcfTracker:
         spectrum = self._spectrum(image_rgb, box.center, window)
         # A_l = G conj(F_l), B = sum_l |F_l|^2
         self._num = self._label_f * np.conj(spectrum)
-        self._den = _power(spectrum)
+        self._den = spectral_power(spectrum, _CHANNEL_POWER)
         if cfg.estimate_scale:
             self._scale_filter.init(image_rgb, box.center, np.array([box.w_px, box.h_px]))
 
@@ -181,6 +178,6 @@ class DcfTracker:
         spectrum = self._spectrum(image_rgb, box.center, self.config.padding * size)
         # A <- (1 - eta) A + eta G conj(F); B <- (1 - eta) B + eta sum_l |F_l|^2
         self._num = (1 - eta) * self._num + eta * (self._label_f * np.conj(spectrum))
-        self._den = (1 - eta) * self._den + eta * _power(spectrum)
+        self._den = (1 - eta) * self._den + eta * spectral_power(spectrum, _CHANNEL_POWER)
         if self.config.estimate_scale:
             self._scale_filter.update(image_rgb, box.center, size)

@@ -58,9 +58,12 @@ class ScaleConfig:
         return np.arange(self.n_scales) - (self.n_scales - 1) / 2
 
 
-def _power(spectrum: npt.NDArray[np.complex64]) -> npt.NDArray[np.float32]:
-    """(n_scales,) sum_d |X_d|^2 of an (n_scales, d) complex64 spectrum, float32."""
-    return np.einsum("kd,kd->k", spectrum.real, spectrum.real) + np.einsum("kd,kd->k", spectrum.imag, spectrum.imag)
+def spectral_power(spectrum: npt.NDArray[np.complex64], subscripts: str) -> npt.NDArray[np.float32]:
+    """sum |X|^2 of a complex64 spectrum over the axis that the einsum `subscripts` ("ab,ab->a") contracts, float32."""
+    return np.einsum(subscripts, spectrum.real, spectrum.real) + np.einsum(subscripts, spectrum.imag, spectrum.imag)
+
+
+_SCALE_POWER = "kd,kd->k"  # (n_scales, d) -> (n_scales,): sum over the feature dimensions
 
 
 class ScaleFilter:
@@ -102,7 +105,7 @@ class ScaleFilter:
         spectrum = self._spectrum(image_rgb, center_px, box)
         # A = G conj(X) per feature dimension, B = sum_d |X_d|^2
         self._num = self._label_f * np.conj(spectrum)
-        self._den = _power(spectrum)
+        self._den = spectral_power(spectrum, _SCALE_POWER)
 
     def estimate(self, image_rgb: ImageRGB, center_px: FloatArray, box_wh_px: FloatArray) -> float:
         """Size factor of the target at `center_px` relative to `box_wh_px`, refined between scale steps."""
@@ -128,7 +131,7 @@ class ScaleFilter:
         if spectrum is None:
             spectrum = self._spectrum(image_rgb, center_px, box_wh_px)
         self._num = (1 - eta) * self._num + eta * (self._label_f * np.conj(spectrum))
-        self._den = (1 - eta) * self._den + eta * _power(spectrum)
+        self._den = (1 - eta) * self._den + eta * spectral_power(spectrum, _SCALE_POWER)
 
     def _reusable_spectrum(self, image_rgb: ImageRGB, center_px: FloatArray,
                            box_wh_px: FloatArray) -> npt.NDArray | None:
