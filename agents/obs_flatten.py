@@ -31,6 +31,7 @@ FEATURE_CLIP = 10.0
 # One derived feature: 1 once the perception has a 3D position (the relative position is non-zero).
 N_DERIVED = 1
 N_FEATURES = sum(size for _, size, _, _ in FEATURE_LAYOUT) + N_DERIVED
+POSITION_KNOWN_INDEX = N_FEATURES - 1  # the derived feature's column
 
 _OFFSETS = np.concatenate([np.full(n, off) for _, n, off, _ in FEATURE_LAYOUT]).astype(np.float32)
 _SCALES = np.concatenate([np.full(n, s) for _, n, _, s in FEATURE_LAYOUT]).astype(np.float32)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -63,7 +65,8 @@ def test_export_onnx_actions_match_sb3_within_tolerance_on_env_observations(algo
     model = random_model(algo, seed=1, **kwargs)
     path = tmp_path / "policy.onnx"
     digest = export_onnx(model, path)
-    follower = LearnedFollower(path, digest, soft_start_s=0.0)  # the exported policy's own actions, no soft start
+    # the exported policy's own actions: no soft start, no acceleration limit
+    follower = LearnedFollower(path, digest, soft_start_s=0.0, max_accel_unfixed_mps2=math.inf)
     observations = env_observations
     batch = {key: np.stack([o[key] for o in observations]) for key in observations[0]}
     features, _ = flatten_observation(batch)

@@ -4,16 +4,19 @@ no torch at run time, and the shipped policy in closed loop."""
 from __future__ import annotations
 
 import hashlib
+import math
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
-from agents.learned import DEFAULT_POLICY, AgentError, LearnedFollower, PolicyModelError
+from agents.learned import (DEFAULT_POLICY, MAX_ACCEL_UNFIXED_MPS2, POLICY_SPEED_SCALE_MPS, AgentError,
+                            LearnedFollower, PolicyModelError)
 from agents.scripted import ScriptedFollower
 from trade.model_file import ModelFileError
 from trade_gym import metrics
+from trade_gym.config import CAMERA_RATE_HZ
 from trade_gym.observation import observation_space
 from trade_gym.rollout import run_episode
 
@@ -136,6 +139,51 @@ def test_soft_start_restarts_per_env_on_episode_start_and_on_reset():
     assert np.all(restarted[1] == 0.0)
     follower.reset()
     assert np.all(follower.predict(batch)[0] == 0.0)  # after reset() the next call is every episode's first
+
+
+def _box_only_observation() -> dict[str, np.ndarray]:
+    """Before the 3D fix: a box off the image centre, no position, velocity or depth yet."""
+    return {**_ahead_left_observation(), "target_pos_rel_m": np.zeros(3, np.float32),
+            "target_vel_mps": np.zeros(3, np.float32), "target_depth_m": np.zeros(1, np.float32),
+            "bbox_norm": np.array([0.1, 0.9, 0.05, 0.05], np.float32)}
+
+
+def test_accel_limit_steps_the_horizontal_setpoint_until_the_3d_fix():
+    unfixed, fixed = _box_only_observation(), _ahead_left_observation()
+    bare = LearnedFollower(soft_start_s=0.0, max_accel_unfixed_mps2=math.inf)
+    free_unfixed, free_fixed = bare.predict(unfixed)[0], bare.predict(fixed)[0]
+    accel_mps2 = 3.0
+    max_step = accel_mps2 / CAMERA_RATE_HZ / POLICY_SPEED_SCALE_MPS
+    n_frames = int(np.ceil(np.linalg.norm(free_unfixed[:2]) / max_step))
+    assert n_frames > 3  # the limit binds on this observation
+    follower = LearnedFollower(soft_start_s=0.0, max_accel_unfixed_mps2=accel_mps2)
+    actions = [follower.predict(unfixed, episode_start=np.array([k == 0]))[0] for k in range(n_frames + 2)]
+    previous = np.zeros(4, np.float32)
+    for action in actions:
+        assert np.linalg.norm(action[:2] - previous[:2]) <= max_step * (1 + 1e-5)
+        np.testing.assert_array_equal(action[2:], free_unfixed[2:])  # climb and yaw are not limited
+        previous = action
+    np.testing.assert_array_equal(actions[-1], free_unfixed)  # reached: the bare policy's action again
+    np.testing.assert_array_equal(follower.predict(fixed)[0], free_fixed)  # after the fix: no limit
+
+
+def test_accel_limit_restarts_per_env_from_hover():
+    unfixed = _box_only_observation()
+    batch = {key: np.stack([value, value]) for key, value in unfixed.items()}
+    free = LearnedFollower(soft_start_s=0.0, max_accel_unfixed_mps2=math.inf).predict(unfixed)[0]
+    follower = LearnedFollower(soft_start_s=0.0)
+    for k in range(60):
+        follower.predict(batch, episode_start=np.array([k == 0, k == 0]))
+    restarted, _ = follower.predict(batch, episode_start=np.array([False, True]))
+    np.testing.assert_array_equal(restarted[0], free)
+    max_step = MAX_ACCEL_UNFIXED_MPS2 / CAMERA_RATE_HZ / POLICY_SPEED_SCALE_MPS
+    assert np.linalg.norm(restarted[1, :2]) == pytest.approx(max_step, rel=1e-5)
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), "6"])
+def test_bad_accel_limit_raises_value_error_naming_it(bad):
+    with pytest.raises(ValueError, match="max_accel_unfixed_mps2"):
+        LearnedFollower(max_accel_unfixed_mps2=bad)
 
 
 @pytest.mark.parametrize("bad", [-0.1, float("nan"), "1"])
