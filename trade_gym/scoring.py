@@ -92,9 +92,10 @@ def estimate_scores(truth: GroundTruth, scored: ScoredEstimate, visible_fraction
     est_box = estimate.bbox.tolist()  # plain floats: scalar IoU on lists beats numpy on 4-vectors
     est_iou = iou(truth.target_bbox.tolist(), est_box)
     return {
-        # Arrays below are fresh every frame (nothing aliases them), so they are not copied.
+        # The truth is fresh every frame; an estimate is not (with perception latency the one held is delivered on
+        # several frames), so its box is copied: no two steps' infos share an array.
         "gt_bbox": truth.target_bbox,
-        "est_bbox": estimate.bbox,
+        "est_bbox": estimate.bbox.copy(),
         "iou": est_iou,
         "target_visible": truth.target_visible_fraction >= visible_fraction_threshold,
         "target_visible_fraction": truth.target_visible_fraction,

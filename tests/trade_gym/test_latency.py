@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from gymnasium.utils.passive_env_checker import data_shares_objects
 
 from agents import ScriptedFollower
 from tests.trade_gym.test_determinism import single_digest
@@ -74,6 +75,17 @@ def test_fixed_latency_delivers_frame_k_at_first_frame_past_its_latency_frame_by
         assert _same(record["obs"]["drone_vel_mps"], undelayed[j]["obs"]["drone_vel_mps"])
     lag = [round(r["estimate_age_s"] / FRAME_S) for r in delayed[-5:]]
     assert lag == [math.ceil(latency_ms / 1000.0 / FRAME_S - 1e-6)] * 5
+
+
+def test_held_estimate_is_not_shared_between_steps():
+    # 400 ms: the missing estimate is held for the first 12 frames; a user keeping every step's info or observation
+    # must not see one change when another is modified (gymnasium's passive checker warns on shared arrays)
+    records = _open_loop_run(SEED, 15, **ORACLE, perception_latency="fixed", perception_latency_ms=400.0)
+    for before, after in zip(records, records[1:]):
+        shared = [key for key in before.keys() & after.keys() if data_shares_objects(before[key], after[key])]
+        assert not shared, (after["t_s"], shared)
+    records[1]["est_bbox"][:] = 0.0
+    assert np.all(np.isnan(records[2]["est_bbox"]))
 
 
 def test_fixed_zero_latency_equals_none_exactly_oracle_closed_loop():
