@@ -21,6 +21,7 @@ policy flies unlimited: limiting it all the time made it lag behind the target (
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +31,7 @@ import onnxruntime as ort
 from agents.obs_flatten import N_FEATURES, POSITION_KNOWN_INDEX, flatten_observation
 from trade.model_file import ModelFileError, check_sha256_format, open_verified_session
 from assets import ASSETS_DIR
-from trade.validation import is_finite_number, require
+from trade.validation import is_finite_number, is_positive_number, require
 from trade_gym.action import ACTION_DIM, DEFAULT_ACTION_SCALE
 from trade_gym.config import CAMERA_RATE_HZ
 
@@ -73,11 +74,13 @@ class LearnedFollower:
         check_sha256_format(expected_sha256)
         require(is_finite_number(soft_start_s) and soft_start_s >= 0.0, "LearnedFollower soft_start_s", soft_start_s,
                 ">= 0")
-        require(isinstance(max_accel_unfixed_mps2, (int, float)) and max_accel_unfixed_mps2 > 0.0,
+        require(max_accel_unfixed_mps2 == math.inf or is_positive_number(max_accel_unfixed_mps2),
                 "LearnedFollower max_accel_unfixed_mps2", max_accel_unfixed_mps2, "> 0 (math.inf: no limit)")
         self.model_path = Path(model_path)
         self.soft_start_s = float(soft_start_s)
         self.max_accel_unfixed_mps2 = float(max_accel_unfixed_mps2)
+        # the limit as a step of the horizontal action per frame [action units]
+        self._max_step = self.max_accel_unfixed_mps2 / CAMERA_RATE_HZ / POLICY_SPEED_SCALE_MPS
         self._session = open_verified_session(self.model_path, expected_sha256, "policy file", PolicyModelError)
         self._input_name = _check_io(self._session, self.model_path)
         self._frames: np.ndarray | None = None  # (N,) frames since each episode's start
@@ -116,12 +119,12 @@ class LearnedFollower:
     def _limit_unfixed_accel(self, action: np.ndarray, position_known: np.ndarray) -> np.ndarray:
         """(n, ACTION_DIM) actions whose horizontal setpoint, where the 3D position is not known yet, moved from the
         last frame's by at most max_accel_unfixed_mps2 / CAMERA_RATE_HZ [m/s]; remembered as the last actions."""
-        max_step = self.max_accel_unfixed_mps2 / CAMERA_RATE_HZ / POLICY_SPEED_SCALE_MPS  # [action units per frame]
         step = action[:, HORIZONTAL] - self._last_action[:, HORIZONTAL]
         norm = np.linalg.norm(step, axis=1)
-        over = ~position_known & (norm > max_step)  # the envs whose step is cut to max_step (same direction)
+        over = ~position_known & (norm > self._max_step)  # the envs whose step is cut to _max_step (same direction)
         limited = action.copy()
-        limited[over, HORIZONTAL] = self._last_action[over, HORIZONTAL] + step[over] * (max_step / norm[over])[:, None]
+        limited[over, HORIZONTAL] = (self._last_action[over, HORIZONTAL]
+                                     + step[over] * (self._max_step / norm[over])[:, None])
         self._last_action = limited
         return limited.copy()
 
