@@ -57,6 +57,9 @@ class GuidedTracker:
         self._tracked_last = True  # whether the previous frame was tracked (its shift is then current)
         # the last tracked frame's prediction, DCF box and output box (the sizes depth scaling starts from)
         self._last_tracked: tuple[PixelPrediction, BBox, BBox] | None = None
+        # the last measured output box (the initial box or an accepted colour blob) and the depth [m] it was seen
+        # at (NaN until a depth is known), from which a refused frame's box is sized
+        self._measured: tuple[BBox, float] | None = None
         rings = np.arange(-config.reacquire_rings, config.reacquire_rings + 1)
         grid = np.stack(np.meshgrid(rings, rings), axis=-1).reshape(-1, 2).astype(np.float64)
         # (x, y) offsets of the re-detection windows in steps, the centre first
@@ -72,6 +75,7 @@ class GuidedTracker:
         self._image_motion_px = np.zeros(2)
         self._tracked_last = True
         self._last_tracked = (PixelPrediction.none(), box, box)
+        self._measured = (box, math.nan)
         return box
 
     def step(self, image_rgb: ImageRGB, prediction: PixelPrediction) -> TrackedFrame:
@@ -85,12 +89,12 @@ class GuidedTracker:
             self._size_by_depth(prediction)
             choice, scale, tracked = self._redetect(image_rgb, prediction)
         if tracked:
-            previous_px = self.dcf.box.center
+            previous = self.dcf.box
             dcf_box = self.dcf.commit(choice.location_px, scale)
-            self._image_motion_px = dcf_box.center - previous_px
+            self._image_motion_px = dcf_box.center - previous.center
             if not choice.ambiguous:
                 self.dcf.update(image_rgb)
-            box = self._refine_box(image_rgb, dcf_box, learn=not choice.ambiguous)
+            box = self._refine_box(image_rgb, dcf_box, prediction, learn=not choice.ambiguous)
         else:
             box = self._coast_box(image_rgb, predicted_px)
             # the last shift is stale once a frame goes untracked: no constant-image-velocity guess
@@ -249,19 +253,39 @@ class GuidedTracker:
         window = self.dcf.config.padding * np.array([box.w_px, box.h_px])
         return bool(np.any(np.abs(np.asarray(predicted_px) - motion_px) > fraction * window))
 
-    def _refine_box(self, image_rgb: ImageRGB, dcf_box: BBox, learn: bool) -> BBox:
-        """The output box: the target's colour blob around the DCF centre when that blob is plausible,
-        else the last output size centred on the DCF location."""
+    def _refine_box(self, image_rgb: ImageRGB, dcf_box: BBox, prediction: PixelPrediction, learn: bool) -> BBox:
+        """The output box: the target's colour blob around the DCF centre when that blob is plausible, else a box
+        centred on the DCF location with the last output box's size, or with `size_refused_box_by_depth` sized by
+        depth from the last measured box (`_measured_size`)."""
         centre = dcf_box.center
-        fallback = BBox.from_center(centre[0], centre[1], self._box.w_px, self._box.h_px)
         if not self.config.box_refinement:
             return dcf_box
         refinement = self.refiner.refine(image_rgb, centre, self._box, size_reference=dcf_box)
         if refinement is None or not refinement.accepted:
-            return fallback
+            w_px, h_px = (self._measured_size(prediction) if self.config.size_refused_box_by_depth
+                          else (self._box.w_px, self._box.h_px))
+            return BBox.from_center(centre[0], centre[1], w_px, h_px)
         if learn:
             self.refiner.update(image_rgb, refinement)
+        self._measured = (refinement.box, prediction.depth_m if self._depth_known(prediction) else math.nan)
         return refinement.box
+
+    def _measured_size(self, prediction: PixelPrediction) -> tuple[float, float]:
+        """(w, h) [px] of a frame whose blob the refiner refused: the last measured box scaled by the ratio of the
+        depth it was seen at to the predicted depth (apparent size ~ 1 / depth) when both are known, else the last
+        output box's size. Where the target's blob merges with its surround the refiner refuses every frame (in
+        the mountain scene it does), and a box held at its first size falls below the IoU of a tracked frame as
+        the drone descends, while its centre is right; the DSST scale is no substitute, as it drifts on a turning
+        target. A box measured before the first 3D fix takes the first known depth as its own (the fix comes a
+        few seconds in, before the drone has closed much of the distance)."""
+        box, depth_m = self._measured
+        if not self._depth_known(prediction):
+            return self._box.w_px, self._box.h_px
+        if math.isnan(depth_m):
+            self._measured = (box, prediction.depth_m)
+            return box.w_px, box.h_px
+        factor = depth_m / prediction.depth_m
+        return factor * box.w_px, factor * box.h_px
 
     def _coast_box(self, image_rgb: ImageRGB, predicted_px: FloatArray) -> BBox:
         """While lost, the box follows the trajectory prediction with its last size."""

@@ -4,6 +4,8 @@ checks and the initial-box snap."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -96,15 +98,25 @@ def test_prediction_keeps_the_tracker_on_the_predicted_one_of_two_identical_cars
         assert all(on_a == 0.0 and on_b > 0.5 for on_a, on_b in after_pan), (config.trajectory_guidance, after_pan)
 
 
-def _growing_car(tracker: GuidedTracker, frames: int = 30, growth_per_frame: float = 0.02) -> None:
-    """A car at the image centre growing by growth_per_frame of its size per frame (the camera descends)."""
+def _growing_car(tracker: GuidedTracker, frames: int = 30, growth_per_frame: float = 0.02,
+                 depth_known: bool = False) -> list[BBox]:
+    """A car at the image centre growing by growth_per_frame of its size per frame (the camera descends from
+    PREDICTED_DEPTH_M); each frame's output box. With `depth_known` each frame has a prediction at the car whose
+    depth shrinks as the car grows (size ~ 1 / depth), else none."""
     ground, centre_px = _ground()[:IMAGE_PX, :IMAGE_PX], np.full(2, IMAGE_PX / 2)
     image = ground.copy()
     tracker.init(image, BBox.from_array(_draw_car(image, centre_px)))
+    boxes = []
     for k in range(1, frames + 1):
         image = ground.copy()
-        _draw_car(image, centre_px, 1.0 + growth_per_frame * k)
-        assert tracker.step(image, PixelPrediction.none()).tracked
+        scale = 1.0 + growth_per_frame * k
+        gt = _draw_car(image, centre_px, scale)
+        prediction = (PixelPrediction(gt[:2] + gt[2:] / 2, PREDICTION_COVARIANCE_PX2, PREDICTED_DEPTH_M / scale,
+                                      PREDICTED_DEPTH_SIGMA_M) if depth_known else PixelPrediction.none())
+        frame = tracker.step(image, prediction)
+        assert frame.tracked
+        boxes.append(frame.box)
+    return boxes
 
 
 def test_injected_dcf_is_the_one_that_tracks():
@@ -146,6 +158,32 @@ def test_injected_refiner_gives_the_output_box():
         frame = tracker.step(image, PixelPrediction.none())
         assert len(refiner.refinements) == k and refiner.refinements[-1].accepted
         assert frame.tracked and frame.box == refiner.refinements[-1].box
+
+
+class _RefusingRefiner(ColourBoxRefiner):
+    """A colour refiner that refuses every blob (as where the target's colours merge with its surround)."""
+
+    def refine(self, *args, **kwargs) -> BoxRefinement | None:
+        refinement = super().refine(*args, **kwargs)
+        return None if refinement is None else replace(refinement, accepted=False, rejection="refused by the test")
+
+
+def test_refused_blob_is_sized_by_depth_from_the_last_measured_box():
+    """With `size_refused_box_by_depth` and every blob refused, the output box is the initial box scaled by the
+    ratio of depths (the first known depth stands in for the initial box's): it grows with the car over 30
+    frames, 1.6x. Without a known depth, or with the switch off (the default), it keeps the initial box's size."""
+    init_box = BBox.from_array(_draw_car(_ground()[:IMAGE_PX, :IMAGE_PX].copy(), np.full(2, IMAGE_PX / 2)))
+    by_depth = GuidedTrackerConfig(size_refused_box_by_depth=True)
+    tracker = GuidedTracker(by_depth, refiner=_RefusingRefiner())
+    boxes = _growing_car(tracker, depth_known=True)
+    growth = (1.0 + 0.02 * 30) / (1.0 + 0.02)  # from the first frame's depth, taken as the initial box's
+    assert boxes[-1].w_px == pytest.approx(growth * init_box.w_px)
+    assert boxes[-1].h_px == pytest.approx(growth * init_box.h_px)
+    assert boxes[-1].w_px > 1.5 * CAR_WH_PX[0]
+    held = _growing_car(GuidedTracker(by_depth, refiner=_RefusingRefiner()))
+    default = _growing_car(GuidedTracker(GuidedTrackerConfig(), refiner=_RefusingRefiner()), depth_known=True)
+    for boxes in (held, default):
+        assert all((box.w_px, box.h_px) == (init_box.w_px, init_box.h_px) for box in boxes)
 
 
 @pytest.mark.parametrize("field, value", [("reacquire_rings", -1), ("reacquire_rings", 1.5), ("snap_iterations", -1),
