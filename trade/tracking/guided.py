@@ -89,9 +89,9 @@ class GuidedTracker:
             self._size_by_depth(prediction)
             choice, scale, tracked = self._redetect(image_rgb, prediction)
         if tracked:
-            previous = self.dcf.box
+            previous_px = self.dcf.box.center
             dcf_box = self.dcf.commit(choice.location_px, scale)
-            self._image_motion_px = dcf_box.center - previous.center
+            self._image_motion_px = dcf_box.center - previous_px
             if not choice.ambiguous:
                 self.dcf.update(image_rgb)
             box = self._refine_box(image_rgb, dcf_box, prediction, learn=not choice.ambiguous)
@@ -267,17 +267,16 @@ class GuidedTracker:
             return BBox.from_center(centre[0], centre[1], w_px, h_px)
         if learn:
             self.refiner.update(image_rgb, refinement)
-        self._measured = (refinement.box, prediction.depth_m if self._depth_known(prediction) else math.nan)
+        if self.config.size_refused_box_by_depth:
+            self._measured = (refinement.box, prediction.depth_m if self._depth_known(prediction) else math.nan)
         return refinement.box
 
     def _measured_size(self, prediction: PixelPrediction) -> tuple[float, float]:
-        """(w, h) [px] of a frame whose blob the refiner refused: the last measured box scaled by the ratio of the
-        depth it was seen at to the predicted depth (apparent size ~ 1 / depth) when both are known, else the last
-        output box's size. Where the target's blob merges with its surround the refiner refuses every frame (in
-        the mountain scene it does), and a box held at its first size falls below the IoU of a tracked frame as
-        the drone descends, while its centre is right; the DSST scale is no substitute, as it drifts on a turning
-        target. A box measured before the first 3D fix takes the first known depth as its own (the fix comes a
-        few seconds in, before the drone has closed much of the distance)."""
+        """(w, h) [px] of a frame whose blob the refiner refused (`GuidedTrackerConfig.size_refused_box_by_depth`
+        says why): the last measured box scaled by the ratio of the depth it was seen at to the predicted depth
+        (apparent size ~ 1 / depth) when both are known, else the last output box's size. A box measured before
+        the first 3D fix is given the first known depth as its own here (the DSST scale is no substitute for the
+        depth: it drifts on a turning target)."""
         box, depth_m = self._measured
         if not self._depth_known(prediction):
             return self._box.w_px, self._box.h_px

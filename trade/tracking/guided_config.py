@@ -86,12 +86,13 @@ class GuidedTrackerConfig:
     holding the last size. In the mountain scene the refiner refuses every blob, so the held box keeps its first
     size while a descending drone sees the target grow, and the IoU falls below a tracked frame's. Off: on
     development worlds 100-119 it made the learned follower's mountain runs whole and raised the pooled success
-    AUC, but lowered the scripted follower's in every scene (the initial box takes the first known depth, 2-3 s
-    late, as its own) and two drifted city runs scored fewer frames above the IoU threshold (commit message)."""
+    AUC, but lowered the scripted follower's in every scene (cause not found) and two drifted city runs scored
+    fewer frames above the IoU threshold (`aa58aae`, benchmarks/results/refused_box_tuning.json)."""
     coast_scale_max_relative_sigma: float = 0.3
     """Scale by depth (the coasting boxes, and with `size_refused_box_by_depth` the output box of a frame whose
-    colour blob the refiner refuses) only while both depths are known to this relative sigma (the depth's 1-sigma over the depth): a 3D estimate
-    gone wrong, whose relative sigma is large, would otherwise shrink the boxes to nothing."""
+    colour blob the refiner refuses) only while both depths are known to this relative sigma (the depth's 1-sigma
+    over the depth): a 3D estimate gone wrong, whose relative sigma is large, would otherwise shrink the boxes to
+    nothing."""
 
     def __post_init__(self) -> None:
         checks = {  # field: (valid, requirement), checked in this order
