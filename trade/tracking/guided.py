@@ -60,6 +60,10 @@ class GuidedTracker:
         # the last measured output box (the initial box or an accepted colour blob) and the depth [m] it was seen
         # at (NaN until a depth is known), from which a refused frame's box is sized
         self._measured: tuple[BBox, float] | None = None
+        # the DCF box's width [px] and the predicted depth [m] at the first tracked frame with a known depth, from
+        # which its size is bounded (GuidedTrackerConfig.dcf_size_depth_tolerance)
+        self._dcf_reference: tuple[float, float] | None = None
+        self._previous_depth_m = math.nan  # the last known predicted depth [m] of a tracked frame
         rings = np.arange(-config.reacquire_rings, config.reacquire_rings + 1)
         grid = np.stack(np.meshgrid(rings, rings), axis=-1).reshape(-1, 2).astype(np.float64)
         # (x, y) offsets of the re-detection windows in steps, the centre first
@@ -76,6 +80,8 @@ class GuidedTracker:
         self._tracked_last = True
         self._last_tracked = (PixelPrediction.none(), box, box)
         self._measured = (box, math.nan)
+        self._dcf_reference = None
+        self._previous_depth_m = math.nan
         return box
 
     def step(self, image_rgb: ImageRGB, prediction: PixelPrediction) -> TrackedFrame:
@@ -90,7 +96,7 @@ class GuidedTracker:
             choice, scale, tracked = self._redetect(image_rgb, prediction)
         if tracked:
             previous_px = self.dcf.box.center
-            dcf_box = self.dcf.commit(choice.location_px, scale)
+            dcf_box = self.dcf.commit(choice.location_px, self._depth_bounded(scale, prediction))
             self._image_motion_px = dcf_box.center - previous_px
             if not choice.ambiguous:
                 self.dcf.update(image_rgb)
@@ -110,6 +116,25 @@ class GuidedTracker:
         for NaN)."""
         return bool(prediction.depth_m > 0
                     and prediction.depth_sigma_m <= self.config.coast_scale_max_relative_sigma * prediction.depth_m)
+
+    def _depth_bounded(self, scale: float, prediction: PixelPrediction) -> float:
+        """The DSST `scale` to commit, limited so that the DCF box's width stays within `dcf_size_depth_tolerance`
+        of the width the depth predicts: its width at the reference frame, scaled by the ratio of that frame's
+        depth to this one's. The reference is the first tracked frame with a known depth, and again every frame
+        whose depth differs from the last known one by more than `dcf_reference_max_depth_step` (a new 3D
+        estimate, not motion)."""
+        tolerance = self.config.dcf_size_depth_tolerance
+        if math.isinf(tolerance) or not self._depth_known(prediction):
+            return scale
+        depth_m, width_px = prediction.depth_m, self.dcf.box.w_px
+        previous_m, self._previous_depth_m = self._previous_depth_m, depth_m
+        if self._dcf_reference is None or abs(depth_m / previous_m - 1.0) > self.config.dcf_reference_max_depth_step:
+            self._dcf_reference = (width_px, depth_m)
+            return scale
+        reference_px, reference_depth_m = self._dcf_reference
+        expected_px = reference_px * reference_depth_m / depth_m
+        bounded_px = min(max(width_px * scale, expected_px / tolerance), expected_px * tolerance)
+        return bounded_px / width_px
 
     def _size_by_depth(self, prediction: PixelPrediction) -> None:
         """While lost, scale the DCF and output boxes from their size at the last tracked frame by the ratio

@@ -80,14 +80,26 @@ class GuidedTrackerConfig:
     """While lost, size the search and coasting boxes by the prediction's depth (apparent size ~ 1 / depth)
     from their size at the last tracked frame: a target that drew away while hidden comes back smaller than
     fixed-size boxes, and the refiner's area test would refuse it and take a lookalike."""
-    size_refused_box_by_depth: bool = False
+    size_refused_box_by_depth: bool = True
     """On a tracked frame whose colour blob the refiner refuses, size the output box from the last accepted blob
     (or the initial box) by the ratio of its depth to the predicted one (apparent size ~ 1 / depth) instead of
-    holding the last size. In the mountain scene the refiner refuses every blob, so the held box keeps its first
-    size while a descending drone sees the target grow, and the IoU falls below a tracked frame's. Off: on
-    development worlds 100-119 it made the learned follower's mountain runs whole and raised the pooled success
-    AUC, but lowered the scripted follower's in every scene (cause not found) and two drifted city runs scored
-    fewer frames above the IoU threshold (`aa58aae`, benchmarks/results/refused_box_tuning.json)."""
+    holding the last size. In the mountain scene the refiner refuses every blob, so a held box keeps its first
+    size while a descending drone sees the target grow, and the IoU falls below a tracked frame's. On together
+    with `dcf_size_depth_tolerance` (benchmarks/results/dcf_size_bound_tuning.json): alone, it lost frames on two
+    city runs whose DCF box had collapsed, which the bound prevents."""
+    dcf_size_depth_tolerance: float = 1.25
+    """Keep the DCF box's width within this factor of the width the depth predicts: its width at a reference frame
+    (`dcf_reference_max_depth_step`) times the ratio of that frame's depth to the current one (apparent size ~
+    1 / depth). On city trucks the DSST scale estimate shrank the box by about 1 % per frame to the DCF's 4 px floor
+    while the truck kept its size, and the box then slid off it (development worlds 114 and 115). Of 1.25 and 1.5,
+    traced on world 114, 1.25 kept the box closer to the truck; it is the value run on all the tuning worlds
+    (benchmarks/results/dcf_size_bound_tuning.json). inf: no bound."""
+    dcf_reference_max_depth_step: float = 0.02
+    """A predicted depth that differs from the last tracked frame's by more than this fraction is a new 3D estimate
+    (a wrong first fix replaced, a filter converging), not motion, and makes this frame the reference of
+    `dcf_size_depth_tolerance`. 0.02 per frame at 30 Hz is a closing speed of 0.6 depths per second (16 m/s at the
+    city's 27 m, 10 m/s at the desert's 16 m), above the drones' (3 m/s vertical, 8 m/s horizontal) and the
+    targets' speeds. inf: the first fix is the only reference."""
     coast_scale_max_relative_sigma: float = 0.3
     """Scale by depth (the coasting boxes, and with `size_refused_box_by_depth` the output box of a frame whose
     colour blob the refiner refuses) only while both depths are known to this relative sigma (the depth's 1-sigma
@@ -105,6 +117,8 @@ class GuidedTrackerConfig:
             "reacquire_gate_box_sigma": (0.0 < self.reacquire_gate_box_sigma < math.inf, "finite and > 0"),
             "snap_search_fraction": (0.0 <= self.snap_search_fraction < math.inf, "finite and >= 0 (0: no search)"),
             "snap_max_side_ratio": (1.0 <= self.snap_max_side_ratio < math.inf, "finite and >= 1"),
+            "dcf_size_depth_tolerance": (self.dcf_size_depth_tolerance >= 1.0, ">= 1 (inf: no bound)"),  # NaN fails
+            "dcf_reference_max_depth_step": (self.dcf_reference_max_depth_step > 0, "> 0 (inf: the first fix only)"),
             **{name: (0.0 < getattr(self, name) < math.inf, "finite and > 0")
                for name in ("second_window_offset_fraction", "reacquire_step_fraction", "coast_scale_max_relative_sigma")},
         }

@@ -171,7 +171,7 @@ class _RefusingRefiner(ColourBoxRefiner):
 def test_refused_blob_is_sized_by_depth_from_the_last_measured_box():
     """With `size_refused_box_by_depth` and every blob refused, the output box is the initial box scaled by the
     ratio of depths (the first known depth stands in for the initial box's): it grows with the car over 30
-    frames, 1.6x. Without a known depth, or with the switch off (the default), it keeps the initial box's size."""
+    frames, 1.6x. Without a known depth, or with the switch off, it keeps the initial box's size."""
     init_box = BBox.from_array(_draw_car(_ground()[:IMAGE_PX, :IMAGE_PX].copy(), np.full(2, IMAGE_PX / 2)))
     by_depth = GuidedTrackerConfig(size_refused_box_by_depth=True)
     tracker = GuidedTracker(by_depth, refiner=_RefusingRefiner())
@@ -181,9 +181,75 @@ def test_refused_blob_is_sized_by_depth_from_the_last_measured_box():
     assert boxes[-1].h_px == pytest.approx(growth * init_box.h_px)
     assert boxes[-1].w_px > 1.5 * CAR_WH_PX[0]
     held = _growing_car(GuidedTracker(by_depth, refiner=_RefusingRefiner()))
-    default = _growing_car(GuidedTracker(GuidedTrackerConfig(), refiner=_RefusingRefiner()), depth_known=True)
-    for boxes in (held, default):
+    off = GuidedTrackerConfig(size_refused_box_by_depth=False)
+    switched_off = _growing_car(GuidedTracker(off, refiner=_RefusingRefiner()), depth_known=True)
+    for boxes in (held, switched_off):
         assert all((box.w_px, box.h_px) == (init_box.w_px, init_box.h_px) for box in boxes)
+
+
+class _ShrinkingDcf(DcfTracker):
+    """A DCF whose scale estimate says the target shrinks by DSST_DRIFT per frame (a DSST drifting on a target
+    that keeps its size, as on a truck seen from above in the city)."""
+
+    def response(self, *args, **kwargs):
+        return replace(super().response(*args, **kwargs), scale=DSST_DRIFT)
+
+    def estimate_scale(self, *args, **kwargs) -> float:
+        return DSST_DRIFT
+
+
+DSST_DRIFT = 0.9
+
+
+@pytest.mark.parametrize("descent", [1.0, 1.5])
+def test_dcf_box_stays_within_the_depth_tolerance_of_its_depth_predicted_size(descent):
+    """A DSST that shrinks the box by 10 % per frame: with `dcf_size_depth_tolerance` the DCF box's width stops at
+    1 / tolerance of its first-fix width scaled by the depth ratio (the car at a constant depth, or at 1 / 1.5 of it
+    by the last frame, under 2 % per frame); without the bound it collapses to the DCF's smallest box (on the shrinking car it
+    loses the car)."""
+    frames, tolerance = 30, 1.25
+    ground, centre_px = _ground()[:IMAGE_PX, :IMAGE_PX], np.full(2, IMAGE_PX / 2)
+    widths = {}
+    for bound in (tolerance, np.inf):
+        dcf = _ShrinkingDcf(DcfConfig())
+        tracker = GuidedTracker(GuidedTrackerConfig(dcf_size_depth_tolerance=bound), dcf=dcf)
+        image = ground.copy()
+        tracker.init(image, BBox.from_array(_draw_car(image, centre_px)))
+        first_fix_w_px = dcf.box.w_px
+        for k in range(1, frames + 1):
+            image = ground.copy()
+            scale = 1.0 + (descent - 1.0) * (k - 1) / (frames - 1)  # apparent size ~ 1 / depth
+            gt = _draw_car(image, centre_px, scale)
+            prediction = PixelPrediction(gt[:2] + gt[2:] / 2, PREDICTION_COVARIANCE_PX2, PREDICTED_DEPTH_M / scale,
+                                         PREDICTED_DEPTH_SIGMA_M)
+            tracked = tracker.step(image, prediction).tracked
+            assert tracked or bound == np.inf
+        widths[bound] = dcf.box.w_px
+    assert widths[tolerance] == pytest.approx(descent * first_fix_w_px / tolerance)
+    if descent == 1.0:
+        assert widths[np.inf] == DcfConfig().min_box_px
+
+
+@pytest.mark.parametrize("max_step", [GuidedTrackerConfig().dcf_reference_max_depth_step, np.inf])
+def test_a_depth_jump_rebases_the_dcf_size_bound(max_step):
+    """A first 3D fix at a third of the true depth (as a city plane fitted to a roof gives), replaced by the true
+    depth at frame 10, a car of constant size: the jump makes that frame the bound's reference and the DCF box keeps
+    the car's width; without the rebase the wrong reference squeezes it to 1.25 / 3 of the car."""
+    config = GuidedTrackerConfig(dcf_size_depth_tolerance=1.25, dcf_reference_max_depth_step=max_step)
+    tracker = GuidedTracker(config)
+    ground, centre_px = _ground()[:IMAGE_PX, :IMAGE_PX], np.full(2, IMAGE_PX / 2)
+    image = ground.copy()
+    tracker.init(image, BBox.from_array(_draw_car(image, centre_px)))
+    for k in range(1, 31):
+        image = ground.copy()
+        gt = _draw_car(image, centre_px)
+        depth_m = PREDICTED_DEPTH_M / 3.0 if k < 10 else PREDICTED_DEPTH_M
+        tracker.step(image, PixelPrediction(gt[:2] + gt[2:] / 2, PREDICTION_COVARIANCE_PX2, depth_m,
+                                            PREDICTED_DEPTH_SIGMA_M / 3.0))
+    if np.isinf(max_step):
+        assert tracker.dcf.box.w_px <= 1.25 / 3.0 * CAR_WH_PX[0] + 1e-9
+    else:
+        assert tracker.dcf.box.w_px == pytest.approx(CAR_WH_PX[0], rel=0.2)
 
 
 @pytest.mark.parametrize("field, value", [("reacquire_rings", -1), ("reacquire_rings", 1.5), ("snap_iterations", -1),
@@ -193,7 +259,9 @@ def test_refused_blob_is_sized_by_depth_from_the_last_measured_box():
                                           ("reacquire_gate_chi2", np.nan), ("reacquire_gate_box_sigma", 0.0),
                                           ("reacquire_gate_box_sigma", np.inf), ("min_peak_score", np.nan),
                                           ("second_window_offset_fraction", 0.0),
-                                          ("coast_scale_max_relative_sigma", -0.1)])
+                                          ("coast_scale_max_relative_sigma", -0.1),
+                                          ("dcf_size_depth_tolerance", 0.9), ("dcf_size_depth_tolerance", np.nan),
+                                          ("dcf_reference_max_depth_step", 0.0)])
 def test_config_rejects_bad_reacquisition_and_snap_settings(field, value):
     with pytest.raises(ValueError, match=f"GuidedTrackerConfig.{field} .*got {value!r}"):
         GuidedTrackerConfig(**{field: value})
