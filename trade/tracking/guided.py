@@ -60,8 +60,8 @@ class GuidedTracker:
         # the last measured output box (the initial box or an accepted colour blob) and the depth [m] it was seen
         # at (NaN until a depth is known), from which a refused frame's box is sized
         self._measured: tuple[BBox, float] | None = None
-        # the DCF box's width [px] and the predicted depth [m] at the first tracked frame with a known depth, from
-        # which its size is bounded (GuidedTrackerConfig.dcf_size_depth_tolerance)
+        # the DCF box's width [px] and the predicted depth [m] at the reference frame (the first tracked frame with a
+        # known depth, or the last depth jump), from which its size is bounded (`_depth_bounded`)
         self._dcf_reference: tuple[float, float] | None = None
         self._previous_depth_m = math.nan  # the last known predicted depth [m] of a tracked frame
         rings = np.arange(-config.reacquire_rings, config.reacquire_rings + 1)
