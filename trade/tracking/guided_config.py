@@ -118,7 +118,8 @@ class GuidedTrackerConfig:
             "snap_search_fraction": (0.0 <= self.snap_search_fraction < math.inf, "finite and >= 0 (0: no search)"),
             "snap_max_side_ratio": (1.0 <= self.snap_max_side_ratio < math.inf, "finite and >= 1"),
             "dcf_size_depth_tolerance": (self.dcf_size_depth_tolerance >= 1.0, ">= 1 (inf: no bound)"),  # NaN fails
-            "dcf_reference_max_depth_step": (self.dcf_reference_max_depth_step > 0, "> 0 (inf: the first fix only)"),
+            "dcf_reference_max_depth_step": (self.dcf_reference_max_depth_step > 0,
+                                             "> 0 (inf: the first fix only)"),
             **{name: (0.0 < getattr(self, name) < math.inf, "finite and > 0")
                for name in ("second_window_offset_fraction", "reacquire_step_fraction", "coast_scale_max_relative_sigma")},
         }

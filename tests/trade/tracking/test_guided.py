@@ -187,6 +187,9 @@ def test_refused_blob_is_sized_by_depth_from_the_last_measured_box():
         assert all((box.w_px, box.h_px) == (init_box.w_px, init_box.h_px) for box in boxes)
 
 
+DSST_DRIFT = 0.9  # the scale a drifting DSST reports on every frame
+
+
 class _ShrinkingDcf(DcfTracker):
     """A DCF whose scale estimate says the target shrinks by DSST_DRIFT per frame (a DSST drifting on a target
     that keeps its size, as on a truck seen from above in the city)."""
@@ -198,15 +201,12 @@ class _ShrinkingDcf(DcfTracker):
         return DSST_DRIFT
 
 
-DSST_DRIFT = 0.9
-
-
 @pytest.mark.parametrize("descent", [1.0, 1.5])
 def test_dcf_box_stays_within_the_depth_tolerance_of_its_depth_predicted_size(descent):
     """A DSST that shrinks the box by 10 % per frame: with `dcf_size_depth_tolerance` the DCF box's width stops at
     1 / tolerance of its first-fix width scaled by the depth ratio (the car at a constant depth, or at 1 / 1.5 of it
-    by the last frame, under 2 % per frame); without the bound it collapses to the DCF's smallest box (on the shrinking car it
-    loses the car)."""
+    by the last frame, under 2 % per frame). Without the bound it collapses to the DCF's smallest box on the car at
+    a constant depth, and loses the growing car."""
     frames, tolerance = 30, 1.25
     ground, centre_px = _ground()[:IMAGE_PX, :IMAGE_PX], np.full(2, IMAGE_PX / 2)
     widths = {}
