@@ -61,7 +61,7 @@ class GuidedTracker:
         # at (NaN until a depth is known), from which a refused frame's box is sized
         self._measured: tuple[BBox, float] | None = None
         # the DCF box's width [px] and the predicted depth [m] at the reference frame (the first tracked frame with a
-        # known depth, or the last depth jump), from which its size is bounded (`_depth_bounded`)
+        # known depth, the last depth jump or the last accepted blob), from which its size is bounded (`_depth_bounded`)
         self._dcf_reference: tuple[float, float] | None = None
         self._previous_depth_m = math.nan  # the last known predicted depth [m] of a tracked frame
         rings = np.arange(-config.reacquire_rings, config.reacquire_rings + 1)
@@ -98,9 +98,9 @@ class GuidedTracker:
             previous_px = self.dcf.box.center
             dcf_box = self.dcf.commit(choice.location_px, self._depth_bounded(scale, prediction))
             self._image_motion_px = dcf_box.center - previous_px
-            if not choice.ambiguous:
-                self.dcf.update(image_rgb)
             box = self._refine_box(image_rgb, dcf_box, prediction, learn=not choice.ambiguous)
+            if not choice.ambiguous:
+                self.dcf.update(image_rgb)  # at the box as the blob bound left it
         else:
             box = self._coast_box(image_rgb, predicted_px)
             # the last shift is stale once a frame goes untracked: no constant-image-velocity guess
@@ -122,7 +122,7 @@ class GuidedTracker:
         of the width the depth predicts: its width at the reference frame, scaled by the ratio of that frame's
         depth to this one's. The reference is the first tracked frame with a known depth, and again every frame
         whose depth differs from the last known one by more than `dcf_reference_max_depth_step` (a new 3D
-        estimate, not motion)."""
+        estimate, not motion) or whose colour blob was accepted (`_bound_by_blob`)."""
         tolerance = self.config.dcf_size_depth_tolerance
         if math.isinf(tolerance) or not self._depth_known(prediction):
             return scale
@@ -294,7 +294,24 @@ class GuidedTracker:
             self.refiner.update(image_rgb, refinement)
         if self.config.size_refused_box_by_depth:
             self._measured = (refinement.box, prediction.depth_m if self._depth_known(prediction) else math.nan)
+        self._bound_by_blob(refinement.box, prediction)
         return refinement.box
+
+    def _bound_by_blob(self, blob: BBox, prediction: PixelPrediction) -> None:
+        """Resize the DCF box about its centre so that its size (square root of its area) lies within
+        `GuidedTrackerConfig.dcf_size_blob_tolerance` of the accepted blob's (`dcf_size_from_blob`), and make this
+        frame the depth bound's reference when its depth is known (the blob has just measured the size the depth
+        bound extrapolates)."""
+        if not self.config.dcf_size_from_blob:
+            return
+        tolerance = self.config.dcf_size_blob_tolerance
+        box = self.dcf.box
+        size_px, blob_px = math.sqrt(box.w_px * box.h_px), math.sqrt(blob.w_px * blob.h_px)
+        bounded_px = min(max(size_px, blob_px / tolerance), blob_px * tolerance)
+        if bounded_px != size_px:
+            box = self.dcf.commit(box.center, bounded_px / size_px)
+        if self._depth_known(prediction):
+            self._dcf_reference = (box.w_px, prediction.depth_m)
 
     def _measured_size(self, prediction: PixelPrediction) -> tuple[float, float]:
         """(w, h) [px] of a frame whose blob the refiner refused (`GuidedTrackerConfig.size_refused_box_by_depth`

@@ -94,6 +94,13 @@ class GuidedTrackerConfig:
     while the truck kept its size, and the box then slid off it (development worlds 114 and 115). Of 1.25 and 1.5,
     traced on world 114, 1.25 kept the box closer to the truck; it is the value run on all the tuning worlds
     (benchmarks/results/dcf_size_bound_tuning.json). inf: no bound."""
+    dcf_size_from_blob: bool = True
+    """On a frame whose colour blob the refiner accepts, keep the DCF box's size (the square root of its area) within
+    `dcf_size_blob_tolerance` of the blob box's, and make that frame the reference of `dcf_size_depth_tolerance`.
+    The DCF box keeps the aspect ratio of the initial box, so on a turning truck its isotropic DSST scale fits one
+    side and undersizes the other; the refiner's fill test then refused the truck's own blob, and the undersized box,
+    mis-centred along the truck, shrank to the DCF's 4 px floor (city development worlds 122, 123, 125 and 129,
+    before the first 3D fix, where the depth bound cannot act)."""
     dcf_reference_max_depth_step: float = 0.02
     """A predicted depth that differs from the last tracked frame's by more than this fraction is a new 3D estimate
     (a wrong first fix replaced, a filter converging), not motion, and makes this frame the reference of
@@ -125,3 +132,11 @@ class GuidedTrackerConfig:
         }
         for name, (valid, requirement) in checks.items():
             require(bool(valid), f"GuidedTrackerConfig.{name}", getattr(self, name), requirement)
+
+    @property
+    def dcf_size_blob_tolerance(self) -> float:
+        """The factor of `dcf_size_from_blob`: sqrt(colour_box.max_blob_fill_ratio) / dcf.scale.scale_step. A DCF box
+        held at the blob's size over this factor, shrunk by one more DSST scale step, still has an area of the blob
+        box's over max_blob_fill_ratio, so the fill test (blob pixels over the DCF box's area) cannot refuse the
+        blob that set the bound (1.15 with the defaults)."""
+        return math.sqrt(self.colour_box.max_blob_fill_ratio) / self.dcf.scale.scale_step

@@ -120,10 +120,10 @@ def _growing_car(tracker: GuidedTracker, frames: int = 30, growth_per_frame: flo
 
 
 def test_injected_dcf_is_the_one_that_tracks():
-    """An injected DCF without scale estimation keeps its box size while the car grows 1.6x; the one built
-    from the config (DSST on) grows with it."""
+    """An injected DCF without scale estimation (and no sizing from the blob) keeps its box size while the car grows
+    1.6x; the one built from the config (DSST on) grows with it."""
     fixed = DcfTracker(DcfConfig(estimate_scale=False))
-    injected = GuidedTracker(GuidedTrackerConfig(), dcf=fixed)
+    injected = GuidedTracker(GuidedTrackerConfig(dcf_size_from_blob=False), dcf=fixed)
     _growing_car(injected)
     assert injected.dcf is fixed and (fixed.box.w_px, fixed.box.h_px) == tuple(CAR_WH_PX)
     built = GuidedTracker(GuidedTrackerConfig())
@@ -191,14 +191,18 @@ DSST_DRIFT = 0.9  # the scale a drifting DSST reports on every frame
 
 
 class _ShrinkingDcf(DcfTracker):
-    """A DCF whose scale estimate says the target shrinks by DSST_DRIFT per frame (a DSST drifting on a target
-    that keeps its size, as on a truck seen from above in the city)."""
+    """A DCF whose scale estimate says the target shrinks by `drift` per frame (a DSST drifting on a target that
+    keeps its size, as on a truck seen from above in the city)."""
+
+    def __init__(self, config: DcfConfig, drift: float = DSST_DRIFT) -> None:
+        super().__init__(config)
+        self.drift = drift
 
     def response(self, *args, **kwargs):
-        return replace(super().response(*args, **kwargs), scale=DSST_DRIFT)
+        return replace(super().response(*args, **kwargs), scale=self.drift)
 
     def estimate_scale(self, *args, **kwargs) -> float:
-        return DSST_DRIFT
+        return self.drift
 
 
 @pytest.mark.parametrize("descent", [1.0, 1.5])
@@ -212,7 +216,8 @@ def test_dcf_box_stays_within_the_depth_tolerance_of_its_depth_predicted_size(de
     widths = {}
     for bound in (tolerance, np.inf):
         dcf = _ShrinkingDcf(DcfConfig())
-        tracker = GuidedTracker(GuidedTrackerConfig(dcf_size_depth_tolerance=bound), dcf=dcf)
+        config = GuidedTrackerConfig(dcf_size_depth_tolerance=bound, dcf_size_from_blob=False)  # depth only
+        tracker = GuidedTracker(config, dcf=dcf)
         image = ground.copy()
         tracker.init(image, BBox.from_array(_draw_car(image, centre_px)))
         first_fix_w_px = dcf.box.w_px
@@ -235,7 +240,8 @@ def test_a_depth_jump_rebases_the_dcf_size_bound(max_step):
     """A first 3D fix at a third of the true depth (as a city plane fitted to a roof gives), replaced by the true
     depth at frame 10, a car of constant size: the jump makes that frame the bound's reference and the DCF box keeps
     the car's width; without the rebase the wrong reference squeezes it to 1.25 / 3 of the car."""
-    config = GuidedTrackerConfig(dcf_size_depth_tolerance=1.25, dcf_reference_max_depth_step=max_step)
+    config = GuidedTrackerConfig(dcf_size_depth_tolerance=1.25, dcf_reference_max_depth_step=max_step,
+                                 dcf_size_from_blob=False)
     tracker = GuidedTracker(config)
     ground, centre_px = _ground()[:IMAGE_PX, :IMAGE_PX], np.full(2, IMAGE_PX / 2)
     image = ground.copy()
@@ -250,6 +256,76 @@ def test_a_depth_jump_rebases_the_dcf_size_bound(max_step):
         assert tracker.dcf.box.w_px <= 1.25 / 3.0 * CAR_WH_PX[0] + 1e-9
     else:
         assert tracker.dcf.box.w_px == pytest.approx(CAR_WH_PX[0], rel=0.2)
+
+
+class _SwitchableRefiner(ColourBoxRefiner):
+    """A refiner whose blobs are refused once `refusing` is set (a truck whose blob the fill test refuses)."""
+
+    refusing = False
+
+    def refine(self, *args, **kwargs) -> BoxRefinement | None:
+        refinement = super().refine(*args, **kwargs)
+        if refinement is None or not self.refusing:
+            return refinement
+        return replace(refinement, accepted=False, rejection="refused by the test")
+
+
+def _area_side(box: BBox) -> float:
+    return float(np.sqrt(box.w_px * box.h_px))
+
+
+ONE_SCALE_STEP_DOWN = 1.0 / DcfConfig().scale.scale_step  # the drift the blob bound is designed for
+
+
+@pytest.mark.parametrize("from_blob", [True, False])
+def test_accepted_blobs_hold_the_dcf_box_at_the_targets_size_before_any_depth(from_blob):
+    """A DSST that shrinks the box by one scale step per frame, a car of constant size and no depth yet (before the
+    first 3D fix the depth bound cannot act): with `dcf_size_from_blob` each accepted blob holds the DCF box's size
+    at 1 / dcf_size_blob_tolerance of the blob's, and the fill test keeps accepting the car's blob; without it the
+    box collapses to the DCF's smallest on the car."""
+    ground, centre_px = _ground()[:IMAGE_PX, :IMAGE_PX], np.full(2, IMAGE_PX / 2)
+    dcf = _ShrinkingDcf(DcfConfig(), ONE_SCALE_STEP_DOWN)
+    config = GuidedTrackerConfig(dcf_size_from_blob=from_blob)
+    tracker = GuidedTracker(config, dcf=dcf)
+    image = ground.copy()
+    tracker.init(image, BBox.from_array(_draw_car(image, centre_px)))
+    for _ in range(60):
+        image = ground.copy()
+        _draw_car(image, centre_px)
+        frame = tracker.step(image, PixelPrediction.none())
+        assert frame.tracked
+    if from_blob:
+        assert _area_side(dcf.box) == pytest.approx(_area_side(frame.box) / config.dcf_size_blob_tolerance)
+        assert iou(frame.box.as_array(), np.array([*(centre_px - CAR_WH_PX / 2), *CAR_WH_PX])) >= 0.7
+    else:
+        assert (dcf.box.w_px, dcf.box.h_px) == (DcfConfig().min_box_px,) * 2
+
+
+def test_an_accepted_blob_makes_its_frame_the_depth_bounds_reference():
+    """At a constant depth the car grows 1.5x over 10 frames whose blobs are accepted and whose DSST follows it (a
+    truck turning under the camera), then every blob is refused while the DSST shrinks the box by a scale step per
+    frame: the depth bound holds the DCF box at 1 / dcf_size_depth_tolerance of its width at the last accepted blob,
+    not of its narrower width at the first fix."""
+    grown = 1.5
+    ground, centre_px = _ground()[:IMAGE_PX, :IMAGE_PX], np.full(2, IMAGE_PX / 2)
+    dcf, refiner = _ShrinkingDcf(DcfConfig(), ONE_SCALE_STEP_DOWN), _SwitchableRefiner()
+    config = GuidedTrackerConfig(dcf_size_from_blob=True)
+    tracker = GuidedTracker(config, dcf=dcf, refiner=refiner)
+    image = ground.copy()
+    tracker.init(image, BBox.from_array(_draw_car(image, centre_px)))
+    first_w_px = dcf.box.w_px
+    for k in range(1, 41):
+        image = ground.copy()
+        scale = 1.0 + (grown - 1.0) * min(k, 10) / 10
+        gt = _draw_car(image, centre_px, scale)
+        dcf.drift = scale / (1.0 + (grown - 1.0) * (k - 1) / 10) if k <= 10 else ONE_SCALE_STEP_DOWN
+        refiner.refusing = k > 10
+        tracker.step(image, PixelPrediction(gt[:2] + gt[2:] / 2, PREDICTION_COVARIANCE_PX2, PREDICTED_DEPTH_M,
+                                            PREDICTED_DEPTH_SIGMA_M))
+        if k == 10:
+            last_blob_w_px = dcf.box.w_px
+    assert last_blob_w_px > 1.2 * first_w_px  # the blobs grew the box beyond the first fix's width
+    assert dcf.box.w_px == pytest.approx(last_blob_w_px / config.dcf_size_depth_tolerance)
 
 
 @pytest.mark.parametrize("field, value", [("reacquire_rings", -1), ("reacquire_rings", 1.5), ("snap_iterations", -1),
