@@ -298,16 +298,17 @@ class GuidedTracker:
         return refinement.box
 
     def _bound_by_blob(self, blob: BBox, prediction: PixelPrediction) -> None:
-        """Resize the DCF box about its centre so that its size (square root of its area) lies within
-        `GuidedTrackerConfig.dcf_size_blob_tolerance` of the accepted blob's (`dcf_size_from_blob`), and make this
+        """Resize the DCF box about its centre towards `GuidedTrackerConfig.dcf_size_blob_tolerance` of the accepted
+        blob's size (square root of the area) by at most one DSST scale step (`dcf_size_from_blob`), and make this
         frame the depth bound's reference when its depth is known (the blob has just measured the size the depth
         bound extrapolates)."""
         if not self.config.dcf_size_from_blob:
             return
-        tolerance = self.config.dcf_size_blob_tolerance
+        tolerance, step = self.config.dcf_size_blob_tolerance, self.dcf.config.scale.scale_step
         box = self.dcf.box
         size_px, blob_px = math.sqrt(box.w_px * box.h_px), math.sqrt(blob.w_px * blob.h_px)
         bounded_px = min(max(size_px, blob_px / tolerance), blob_px * tolerance)
+        bounded_px = min(max(bounded_px, size_px / step), size_px * step)
         if bounded_px != size_px:
             box = self.dcf.commit(box.center, bounded_px / size_px)
         if self._depth_known(prediction):

@@ -95,12 +95,14 @@ class GuidedTrackerConfig:
     traced on world 114, 1.25 kept the box closer to the truck; it is the value run on all the tuning worlds
     (benchmarks/results/dcf_size_bound_tuning.json). inf: no bound."""
     dcf_size_from_blob: bool = True
-    """On a frame whose colour blob the refiner accepts, keep the DCF box's size (the square root of its area) within
-    `dcf_size_blob_tolerance` of the blob box's, and make that frame the reference of `dcf_size_depth_tolerance`.
-    The DCF box keeps the aspect ratio of the initial box, so on a turning truck its isotropic DSST scale fits one
-    side and undersizes the other; the refiner's fill test then refused the truck's own blob, and the undersized box,
-    mis-centred along the truck, shrank to the DCF's 4 px floor (city development worlds 122, 123, 125 and 129,
-    before the first 3D fix, where the depth bound cannot act)."""
+    """On a frame whose colour blob the refiner accepts, move the DCF box's size (the square root of its area)
+    towards `dcf_size_blob_tolerance` of the blob box's, by at most one DSST scale step per frame, and make that
+    frame the reference of `dcf_size_depth_tolerance`. The DCF box keeps the aspect ratio of the initial box, so on
+    a turning truck its isotropic DSST scale fits one side and undersizes the other; the refiner's fill test then
+    refused the truck's own blob, and the undersized box, mis-centred along the truck, shrank to the DCF's 4 px
+    floor (city development worlds 122, 123, 125 and 129, before the first 3D fix, where the depth bound cannot
+    act). The step limit is for a blob merged with a look-alike: resized to it at once, the DCF box let the fill
+    test pass the next merged blobs and grew off the target (desert tuning worlds 103 and 112, the crossing car)."""
     dcf_reference_max_depth_step: float = 0.02
     """A predicted depth that differs from the last tracked frame's by more than this fraction is a new 3D estimate
     (a wrong first fix replaced, a filter converging), not motion, and makes this frame the reference of
