@@ -301,6 +301,35 @@ def test_accepted_blobs_hold_the_dcf_box_at_the_targets_size_before_any_depth(fr
         assert (dcf.box.w_px, dcf.box.h_px) == (DcfConfig().min_box_px,) * 2
 
 
+class _MergingRefiner(ColourBoxRefiner):
+    """A refiner that accepts, as the target's blob, a box twice the car's width (the car and a look-alike beside it
+    merged into one blob)."""
+
+    def refine(self, *args, **kwargs) -> BoxRefinement | None:
+        refinement = super().refine(*args, **kwargs)
+        if refinement is None:
+            return None
+        box = refinement.box
+        return replace(refinement, box=BBox(box.x_px, box.y_px, 2.0 * box.w_px, box.h_px), accepted=True, rejection="")
+
+
+def test_a_merged_blob_grows_the_dcf_box_by_at_most_one_scale_step_per_frame():
+    """Accepted blobs twice the car's width for 5 frames, a DCF without scale estimation: the blob bound grows the DCF
+    box's size by one DSST scale step per frame, not to the merged blob's at once."""
+    ground, centre_px = _ground()[:IMAGE_PX, :IMAGE_PX], np.full(2, IMAGE_PX / 2)
+    dcf = DcfTracker(DcfConfig(estimate_scale=False))
+    tracker = GuidedTracker(GuidedTrackerConfig(dcf_size_from_blob=True), dcf=dcf, refiner=_MergingRefiner())
+    image = ground.copy()
+    tracker.init(image, BBox.from_array(_draw_car(image, centre_px)))
+    first_px = _area_side(dcf.box)
+    frames = 5
+    for _ in range(frames):
+        image = ground.copy()
+        _draw_car(image, centre_px)
+        tracker.step(image, PixelPrediction.none())
+    assert _area_side(dcf.box) == pytest.approx(first_px * DcfConfig().scale.scale_step**frames)
+
+
 def test_an_accepted_blob_makes_its_frame_the_depth_bounds_reference():
     """At a constant depth the car grows 1.5x over 10 frames whose blobs are accepted and whose DSST follows it (a
     truck turning under the camera), then every blob is refused while the DSST shrinks the box by a scale step per
