@@ -304,7 +304,9 @@ class GuidedTracker:
         bound extrapolates)."""
         if not self.config.dcf_size_from_blob:
             return
-        tolerance, step = self.config.dcf_size_blob_tolerance, self.dcf.config.scale.scale_step
+        # the tolerance of GuidedTrackerConfig.dcf_size_blob_tolerance, from the components in use (they may be injected)
+        step = self.dcf.config.scale.scale_step
+        tolerance = math.sqrt(self.refiner.config.max_blob_fill_ratio) / step
         box = self.dcf.box
         size_px, blob_px = math.sqrt(box.w_px * box.h_px), math.sqrt(blob.w_px * blob.h_px)
         bounded_px = min(max(size_px, blob_px / tolerance), blob_px * tolerance)

@@ -140,5 +140,5 @@ class GuidedTrackerConfig:
         """The factor of `dcf_size_from_blob`: sqrt(colour_box.max_blob_fill_ratio) / dcf.scale.scale_step. A DCF box
         held at the blob's size over this factor, shrunk by one more DSST scale step, still has an area of the blob
         box's over max_blob_fill_ratio, so the fill test (blob pixels over the DCF box's area) cannot refuse the
-        blob that set the bound (1.15 with the defaults)."""
+        blob that set the bound (1.15 with the defaults). A tracker given its own DCF or refiner uses theirs."""
         return math.sqrt(self.colour_box.max_blob_fill_ratio) / self.dcf.scale.scale_step
