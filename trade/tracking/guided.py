@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from trade.tracking.colour_box import ColourBoxRefiner
 from trade.tracking.dcf import DcfTracker
-from trade.tracking.guided_config import GuidedTrackerConfig
+from trade.tracking.guided_config import GuidedTrackerConfig, blob_size_tolerance
 from trade.tracking.peaks import PeakChoice, highest_peak, peaks_above, select_peak
 from trade.types import BBox, PixelPrediction
 
@@ -304,9 +304,8 @@ class GuidedTracker:
         bound extrapolates)."""
         if not self.config.dcf_size_from_blob:
             return
-        # the tolerance of GuidedTrackerConfig.dcf_size_blob_tolerance, from the components in use (they may be injected)
-        step = self.dcf.config.scale.scale_step
-        tolerance = math.sqrt(self.refiner.config.max_blob_fill_ratio) / step
+        step = self.dcf.config.scale.scale_step  # from the components in use: they may be injected
+        tolerance = blob_size_tolerance(self.refiner.config.max_blob_fill_ratio, step)
         box = self.dcf.box
         size_px, blob_px = math.sqrt(box.w_px * box.h_px), math.sqrt(blob.w_px * blob.h_px)
         bounded_px = min(max(size_px, blob_px / tolerance), blob_px * tolerance)

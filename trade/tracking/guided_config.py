@@ -16,6 +16,14 @@ from trade.validation import require
 CHI2_2DOF_99 = 9.21
 
 
+def blob_size_tolerance(max_blob_fill_ratio: float, scale_step: float) -> float:
+    """The factor of `GuidedTrackerConfig.dcf_size_from_blob`: sqrt(max_blob_fill_ratio) / scale_step. A DCF box held
+    at the blob's size over this factor, shrunk by one more DSST scale step, still has an area of the blob box's over
+    max_blob_fill_ratio, so the fill test (blob pixels over the DCF box's area) cannot refuse the blob that set the
+    bound (1.15 with the defaults)."""
+    return math.sqrt(max_blob_fill_ratio) / scale_step
+
+
 @dataclass(frozen=True)
 class GuidedTrackerConfig:
     """Paper defaults for the image side of TRADE; `trajectory_guidance=False` is the "dcf" baseline."""
@@ -137,8 +145,6 @@ class GuidedTrackerConfig:
 
     @property
     def dcf_size_blob_tolerance(self) -> float:
-        """The factor of `dcf_size_from_blob`: sqrt(colour_box.max_blob_fill_ratio) / dcf.scale.scale_step. A DCF box
-        held at the blob's size over this factor, shrunk by one more DSST scale step, still has an area of the blob
-        box's over max_blob_fill_ratio, so the fill test (blob pixels over the DCF box's area) cannot refuse the
-        blob that set the bound (1.15 with the defaults). A tracker given its own DCF or refiner uses theirs."""
-        return math.sqrt(self.colour_box.max_blob_fill_ratio) / self.dcf.scale.scale_step
+        """`blob_size_tolerance` of this config's colour box and DCF settings; a tracker given its own DCF or refiner
+        uses theirs."""
+        return blob_size_tolerance(self.colour_box.max_blob_fill_ratio, self.dcf.scale.scale_step)

@@ -160,12 +160,22 @@ def test_injected_refiner_gives_the_output_box():
         assert frame.tracked and frame.box == refiner.refinements[-1].box
 
 
-class _RefusingRefiner(ColourBoxRefiner):
-    """A colour refiner that refuses every blob (as where the target's colours merge with its surround)."""
+class _SwitchableRefiner(ColourBoxRefiner):
+    """A refiner whose blobs are refused once `refusing` is set (a truck whose blob the fill test refuses)."""
+
+    refusing = False
 
     def refine(self, *args, **kwargs) -> BoxRefinement | None:
         refinement = super().refine(*args, **kwargs)
-        return None if refinement is None else replace(refinement, accepted=False, rejection="refused by the test")
+        if refinement is None or not self.refusing:
+            return refinement
+        return replace(refinement, accepted=False, rejection="refused by the test")
+
+
+class _RefusingRefiner(_SwitchableRefiner):
+    """A colour refiner that refuses every blob (as where the target's colours merge with its surround)."""
+
+    refusing = True
 
 
 def test_refused_blob_is_sized_by_depth_from_the_last_measured_box():
@@ -256,18 +266,6 @@ def test_a_depth_jump_rebases_the_dcf_size_bound(max_step):
         assert tracker.dcf.box.w_px <= 1.25 / 3.0 * CAR_WH_PX[0] + 1e-9
     else:
         assert tracker.dcf.box.w_px == pytest.approx(CAR_WH_PX[0], rel=0.2)
-
-
-class _SwitchableRefiner(ColourBoxRefiner):
-    """A refiner whose blobs are refused once `refusing` is set (a truck whose blob the fill test refuses)."""
-
-    refusing = False
-
-    def refine(self, *args, **kwargs) -> BoxRefinement | None:
-        refinement = super().refine(*args, **kwargs)
-        if refinement is None or not self.refusing:
-            return refinement
-        return replace(refinement, accepted=False, rejection="refused by the test")
 
 
 def _area_side(box: BBox) -> float:
