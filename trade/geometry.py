@@ -133,6 +133,34 @@ class Pose:
         return np.atleast_2d(points) @ self.R.T + self.t
 
 
+@dataclass(frozen=True, eq=False)
+class RotationWarp:
+    """Where the camera's rotation between two frames moves an image point: the infinite homography
+    H = K R K^-1 [px -> px], R the rotation from the earlier camera frame to the later. Exact for a camera that
+    only rotates; a translation t adds the parallax of a point at depth z, about f |t| / z px (a drone moving
+    0.3 m a frame at 25 m: 3 px on a 256 px image, where one degree of pitch is 4 px)."""
+
+    H: FloatArray  # (3, 3)
+
+    @classmethod
+    def identity(cls) -> RotationWarp:
+        return cls(np.eye(3))
+
+    @classmethod
+    def between(cls, intrinsics: CameraIntrinsics, T_world_from: Pose, T_world_to: Pose) -> RotationWarp:
+        """The warp from the image of a camera at `T_world_from` to that of one at `T_world_to` (positions ignored)."""
+        K = intrinsics.K
+        K_inv = np.array([[1.0 / intrinsics.fx_px, 0.0, -intrinsics.cx_px / intrinsics.fx_px],
+                          [0.0, 1.0 / intrinsics.fy_px, -intrinsics.cy_px / intrinsics.fy_px], [0.0, 0.0, 1.0]])
+        return cls(K @ (T_world_to.R.T @ T_world_from.R) @ K_inv)
+
+    def apply(self, pixel_px: FloatArray) -> FloatArray:
+        """(2,) pixel (x, y) in the earlier image -> (2,) in the later; NaN when its ray is not in front of the later
+        camera (as `CameraIntrinsics.project`)."""
+        x, y, w = self.H @ np.array([pixel_px[0], pixel_px[1], 1.0])
+        return np.array([x / w, y / w]) if w > 0 else np.full(2, np.nan)
+
+
 def project_world(K: CameraIntrinsics, T_world_cam: Pose, points_world: FloatArray) -> FloatArray:
     """World points (N, 3) [m] -> pixels (N, 2); NaN behind the camera."""
     return K.project(T_world_cam.inverse().apply(points_world))

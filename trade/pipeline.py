@@ -19,7 +19,7 @@ import numpy.typing as npt
 
 from trade.depth_only import DepthOnlyConfig, DepthOnlyLocaliser
 from trade.frame_guard import OUT_OF_VIEW, FrameGuardConfig, TrackedFrame, predicted_out_of_view, unusable_frame
-from trade.geometry import CameraIntrinsics, Pose
+from trade.geometry import CameraIntrinsics, Pose, RotationWarp
 from trade.ground_filter import DepthPredictor, GroundFilter, GroundFilterConfig
 from trade.planes import MultiRansacConfig, Plane, multi_ransac
 from trade.raycast import RaycastConfig, depth_uncertainty, raycast_plane
@@ -214,7 +214,8 @@ class TradePipeline:
         start = time.perf_counter()
         prediction = self._predict_pixel(t_s, T_world_cam)
         predicted_px = prediction.centre_px
-        frame = self.tracking.step(image_rgb, prediction)
+        rotation = RotationWarp.between(self.intrinsics, self._tracked.T_world_cam, T_world_cam)
+        frame = self.tracking.step(image_rgb, prediction, rotation)
         box, choice, tracked = frame.box, frame.choice, frame.tracked
         tracker_ms = (time.perf_counter() - start) * 1e3
         start = time.perf_counter()

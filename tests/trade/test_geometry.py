@@ -1,13 +1,14 @@
 """Tests of the camera geometry helpers that have no other home: the projected covariance
-(`CameraIntrinsics.project_covariance`) and the rotation-quaternion conversions."""
+(`CameraIntrinsics.project_covariance`), the rotation-quaternion conversions and the rotation warp."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
-
 import pytest
 
-from trade.geometry import CameraIntrinsics, Pose, matrix_to_quat_xyzw, project_world, quat_xyzw_to_matrix, rotation_z
+from trade.geometry import (CameraIntrinsics, Pose, RotationWarp, matrix_to_quat_xyzw, project_world, quat_xyzw_to_matrix,
+                            rotation_z)
 
 SAMPLES = 200_000
 N_ROTATIONS = 20
@@ -65,3 +66,23 @@ def test_quat_to_matrix_round_trip_recovers_quaternion_up_to_sign(seed) -> None:
         q /= np.linalg.norm(q)
         back = np.array(matrix_to_quat_xyzw(quat_xyzw_to_matrix(q).ravel()))
         np.testing.assert_allclose(back * np.sign(back @ q), q, atol=1e-12)  # q and -q are one rotation
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_rotation_warp_maps_a_points_pixel_to_where_the_turned_camera_sees_it(seed) -> None:
+    """Two cameras at one position, the second turned by up to 0.2 rad about a random axis: the warp takes each point's
+    pixel in the first image to its pixel in the second, at any depth; a ray turned behind the second camera is NaN."""
+    rng = np.random.default_rng(seed)
+    K = CameraIntrinsics.from_fov(256, 256, 60.0)
+    T_first = Pose(_random_rotations(seed)[0], rng.normal(size=3))
+    axis = rng.normal(size=3)
+    turn, _ = cv2.Rodrigues(0.2 * rng.uniform() * axis / np.linalg.norm(axis))
+    T_second = Pose(T_first.R @ turn, T_first.t)
+    pixels = rng.uniform(0, 255, size=(20, 2))
+    points = T_first.apply(K.backproject(pixels, rng.uniform(5.0, 500.0, size=20)))
+    expected = project_world(K, T_second, points)
+    warp = RotationWarp.between(K, T_first, T_second)
+    np.testing.assert_allclose([warp.apply(p) for p in pixels], expected, atol=1e-6)
+    assert np.all(np.isnan(RotationWarp.between(K, T_first, Pose(T_first.R @ np.diag([1.0, -1.0, -1.0]),
+                                                                   T_first.t)).apply(pixels[0])))
+    np.testing.assert_allclose(RotationWarp.identity().apply(pixels[0]), pixels[0])

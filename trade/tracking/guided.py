@@ -19,6 +19,7 @@ import numpy.typing as npt
 from trade.tracking.colour_box import ColourBoxRefiner
 from trade.tracking.dcf import DcfTracker
 from trade.tracking.guided_config import GuidedTrackerConfig, blob_size_tolerance
+from trade.geometry import RotationWarp
 from trade.tracking.peaks import PeakChoice, highest_peak, peaks_above, select_peak
 from trade.types import BBox, PixelPrediction
 
@@ -53,7 +54,8 @@ class GuidedTracker:
         self.dcf = dcf if dcf is not None else DcfTracker(config.dcf)
         self.refiner = refiner if refiner is not None else ColourBoxRefiner(config.colour_box)
         self._box: BBox | None = None  # last output box
-        self._image_motion_px = np.zeros(2)  # last frame-to-frame shift of the tracked box centre (x, y)
+        # last frame-to-frame shift of the tracked box centre (x, y), less the camera's rotation (`step`)
+        self._image_motion_px = np.zeros(2)
         self._tracked_last = True  # whether the previous frame was tracked (its shift is then current)
         # the last tracked frame's prediction, DCF box and output box (the sizes depth scaling starts from)
         self._last_tracked: tuple[PixelPrediction, BBox, BBox] | None = None
@@ -84,10 +86,13 @@ class GuidedTracker:
         self._previous_depth_m = math.nan
         return box
 
-    def step(self, image_rgb: ImageRGB, prediction: PixelPrediction) -> TrackedFrame:
-        """Track into the next frame, guided by the trajectory model's `prediction`."""
+    def step(self, image_rgb: ImageRGB, prediction: PixelPrediction, rotation: RotationWarp | None = None) -> TrackedFrame:
+        """Track into the next frame, guided by the trajectory model's `prediction`; `rotation` is the camera's
+        rotation since the last step (`GuidedTrackerConfig.follow_camera_rotation`; None: not known, no warp)."""
         cfg = self.config
         predicted_px = prediction.centre_px
+        if rotation is not None and cfg.trajectory_guidance and cfg.follow_camera_rotation:
+            self._carry(rotation)
         if self._tracked_last or not cfg.trajectory_guidance:
             choice, scale = self._choose_peak(image_rgb, predicted_px)
             tracked = choice.score >= cfg.min_peak_score or not cfg.trajectory_guidance
@@ -110,6 +115,18 @@ class GuidedTracker:
         if tracked:
             self._last_tracked = (prediction, self.dcf.box, box)
         return TrackedFrame(box, choice, tracked)
+
+    def _carry(self, rotation: RotationWarp) -> None:
+        """Move the DCF and output boxes' centres to where the camera's rotation since the last frame puts them
+        (sizes kept; the DCF's is clamped to the image as on every commit, and a centre whose ray turns behind the
+        camera stays). The box's next shift is then measured from the carried centre, so the constant image velocity
+        of `_choose_peak` is the target's own motion in the image, not the camera's last turn."""
+        centre = rotation.apply(self.dcf.box.center)
+        if np.all(np.isfinite(centre)):
+            self.dcf.commit(centre)
+        centre = rotation.apply(self._box.center)
+        if np.all(np.isfinite(centre)):
+            self._box = BBox.from_center(centre[0], centre[1], self._box.w_px, self._box.h_px)
 
     def _depth_known(self, prediction: PixelPrediction) -> bool:
         """Whether the prediction's depth is positive and known to coast_scale_max_relative_sigma (False

@@ -58,6 +58,12 @@ class GuidedTrackerConfig:
     merges with a neighbour or keeps a sliver is not the target)."""
     min_peak_score: float = 0.15
     """Below this peak score the target is lost this frame and the estimate coasts."""
+    follow_camera_rotation: bool = True
+    """With `trajectory_guidance`, carry the boxes into each frame by the camera's rotation since the last one (the
+    pose's, `trade.geometry.RotationWarp`) before the search, and measure the constant image velocity without it. A
+    downward camera turns with the drone: a follower's pitch command moved the target up to 22 px in one frame, more
+    than half a 2x-box window, while what the rotation leaves of its image motion stayed under 1.5 px (mountain
+    development world 116, learned follower). Off, and in the "dcf" baseline, the window starts at the last box as in the paper."""
     second_window_offset_fraction: float = 0.25
     """Search the constant-image-velocity window too when the prediction is offset from it by more than this
     fraction of the search window along either axis (a prediction from a wrong 3D estimate drifts off)."""

@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
+from trade.geometry import RotationWarp
 from trade.tracking.colour_box import BoxRefinement, ColourBoxRefiner
 from trade.tracking.dcf import DcfConfig, DcfTracker
 from trade.tracking.guided import GuidedTracker
@@ -353,6 +354,37 @@ def test_an_accepted_blob_makes_its_frame_the_depth_bounds_reference():
             last_blob_w_px = dcf.box.w_px
     assert last_blob_w_px > 1.2 * first_w_px  # the blobs grew the box beyond the first fix's width
     assert dcf.box.w_px == pytest.approx(last_blob_w_px / config.dcf_size_depth_tolerance)
+
+
+def _camera_turn(shift_px: tuple[int, int], config: GuidedTrackerConfig, rotation_known: bool) -> list[float]:
+    """A parked car, tracked without a trajectory prediction (before the first 3D fix); at frame 4 the camera turns so
+    that the car moves by `shift_px` (x, y) in the image, then holds still for 5 frames. The tracker is given that
+    turn as a `RotationWarp` (a pure image shift) when `rotation_known`. Per frame, the output box's IoU with the car
+    (0 for an untracked frame)."""
+    ground, car_px, camera_px = _ground(), np.array([120.0, 120.0]), np.array([60, 60])
+    image, (box,) = _view(ground, [car_px], (60, 60))
+    tracker = GuidedTracker(config)
+    tracker.init(image, BBox.from_array(box))
+    overlaps = []
+    for k in range(1, 10):
+        shift = np.array(shift_px) if k == 4 else np.zeros(2, dtype=int)
+        camera_px = camera_px - shift
+        image, (box,) = _view(ground, [car_px], tuple(camera_px))
+        turn = RotationWarp(np.array([[1.0, 0.0, shift[0]], [0.0, 1.0, shift[1]], [0.0, 0.0, 1.0]]))
+        frame = tracker.step(image, PixelPrediction.none(), turn if rotation_known else None)
+        overlaps.append(iou(frame.box.as_array(), box) if frame.tracked else 0.0)
+    return overlaps
+
+
+@pytest.mark.parametrize("shift_px", [(12, 0), (0, 20), (14, 14)])
+def test_the_camera_turn_carries_the_boxes_and_is_not_taken_for_image_velocity(shift_px):
+    """A turn that moves the car more than half the search window in one frame: carried by the rotation, the tracker
+    stays on the car through the turn and the still frames after it (measured from the uncarried box, the turn would
+    be a constant image velocity that moves the next windows off the car). Without the rotation, or with
+    follow_camera_rotation off, the window starts at the last box and the car is lost at the turn."""
+    assert min(_camera_turn(shift_px, GuidedTrackerConfig(), True)) > 0.8
+    for config, known in ((GuidedTrackerConfig(), False), (GuidedTrackerConfig(follow_camera_rotation=False), True)):
+        assert _camera_turn(shift_px, config, known)[3] < 0.3, (config.follow_camera_rotation, known)
 
 
 @pytest.mark.parametrize("field, value", [("reacquire_rings", -1), ("reacquire_rings", 1.5), ("snap_iterations", -1),
