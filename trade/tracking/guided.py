@@ -1,7 +1,8 @@
 """The image side of TRADE: the correlation filter guided by the trajectory prediction, per frame.
 
-Owns the DCF and the colour model, the choice of a peak near the trajectory prediction (with the
-constant-image-velocity window as a second opinion), re-detection while lost (inside the prediction's
+Owns the DCF and the colour model, the boxes carried into each frame by the camera's rotation (from the pose),
+the choice of a peak near the trajectory prediction (with the constant-image-velocity window as a second
+opinion), re-detection while lost (inside the prediction's
 validation gate, with the boxes sized by its depth), the output box (colour-blob refinement, or coasting on
 the prediction) and the optional snapping of the initial box. Its settings are `GuidedTrackerConfig`; the
 DCF and the colour refiner are injected (built from the config when not given).
