@@ -138,7 +138,7 @@ class RotationWarp:
     """Where the camera's rotation between two frames moves an image point: the infinite homography
     H = K R K^-1 [px -> px], R the rotation from the earlier camera frame to the later. Exact for a camera that
     only rotates; a translation t adds the parallax of a point at depth z, about f |t| / z px (a drone moving
-    0.3 m a frame at 25 m: 3 px on a 256 px image, where one degree of pitch is 4 px)."""
+    0.3 m a frame at 25 m: 1.1 px with the default 256 px, 110 degree camera, where one degree of pitch is 1.6 px)."""
 
     H: FloatArray  # (3, 3)
 

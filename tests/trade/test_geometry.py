@@ -7,8 +7,8 @@ import cv2
 import numpy as np
 import pytest
 
-from trade.geometry import (CameraIntrinsics, Pose, RotationWarp, matrix_to_quat_xyzw, project_world, quat_xyzw_to_matrix,
-                            rotation_z)
+from trade.geometry import (CameraIntrinsics, Pose, RotationWarp, matrix_to_quat_xyzw, project_world,
+                            quat_xyzw_to_matrix, rotation_z)
 
 SAMPLES = 200_000
 N_ROTATIONS = 20

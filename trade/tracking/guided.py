@@ -2,10 +2,10 @@
 
 Owns the DCF and the colour model, the boxes carried into each frame by the camera's rotation (from the pose),
 the choice of a peak near the trajectory prediction (with the constant-image-velocity window as a second
-opinion), re-detection while lost (inside the prediction's
-validation gate, with the boxes sized by its depth), the output box (colour-blob refinement, or coasting on
-the prediction) and the optional snapping of the initial box. Its settings are `GuidedTrackerConfig`; the
-DCF and the colour refiner are injected (built from the config when not given).
+opinion), re-detection while lost (inside the prediction's validation gate, with the boxes sized by its depth),
+the output box (colour-blob refinement, or coasting on the prediction) and the optional snapping of the initial
+box. Its settings are `GuidedTrackerConfig`; the DCF and the colour refiner are injected (built from the config
+when not given).
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from trade.geometry import RotationWarp
 from trade.tracking.colour_box import ColourBoxRefiner
 from trade.tracking.dcf import DcfTracker
 from trade.tracking.guided_config import GuidedTrackerConfig, blob_size_tolerance
-from trade.geometry import RotationWarp
 from trade.tracking.peaks import PeakChoice, highest_peak, peaks_above, select_peak
 from trade.types import BBox, PixelPrediction
 
@@ -87,7 +87,8 @@ class GuidedTracker:
         self._previous_depth_m = math.nan
         return box
 
-    def step(self, image_rgb: ImageRGB, prediction: PixelPrediction, rotation: RotationWarp | None = None) -> TrackedFrame:
+    def step(self, image_rgb: ImageRGB, prediction: PixelPrediction,
+             rotation: RotationWarp | None = None) -> TrackedFrame:
         """Track into the next frame, guided by the trajectory model's `prediction`; `rotation` is the camera's
         rotation since the last step (`GuidedTrackerConfig.follow_camera_rotation`; None: not known, no warp)."""
         cfg = self.config

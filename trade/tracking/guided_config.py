@@ -63,7 +63,8 @@ class GuidedTrackerConfig:
     pose's, `trade.geometry.RotationWarp`) before the search, and measure the constant image velocity without it. A
     downward camera turns with the drone: a follower's pitch command moved the target up to 22 px in one frame, more
     than half a 2x-box window, while what the rotation leaves of its image motion stayed under 1.5 px (mountain
-    development world 116, learned follower). Off, and in the "dcf" baseline, the window starts at the last box as in the paper."""
+    development world 116, learned follower). Off, and in the "dcf" baseline, the window starts at the last box, as
+    in the paper."""
     second_window_offset_fraction: float = 0.25
     """Search the constant-image-velocity window too when the prediction is offset from it by more than this
     fraction of the search window along either axis (a prediction from a wrong 3D estimate drifts off)."""
