@@ -150,9 +150,7 @@ class RotationWarp:
     def between(cls, intrinsics: CameraIntrinsics, T_world_from: Pose, T_world_to: Pose) -> RotationWarp:
         """The warp from the image of a camera at `T_world_from` to that of one at `T_world_to` (positions ignored)."""
         K = intrinsics.K
-        K_inv = np.array([[1.0 / intrinsics.fx_px, 0.0, -intrinsics.cx_px / intrinsics.fx_px],
-                          [0.0, 1.0 / intrinsics.fy_px, -intrinsics.cy_px / intrinsics.fy_px], [0.0, 0.0, 1.0]])
-        return cls(K @ (T_world_to.R.T @ T_world_from.R) @ K_inv)
+        return cls(K @ (T_world_to.R.T @ T_world_from.R) @ np.linalg.inv(K))
 
     def apply(self, pixel_px: FloatArray) -> FloatArray:
         """(2,) pixel (x, y) in the earlier image -> (2,) in the later; NaN when its ray is not in front of the later
