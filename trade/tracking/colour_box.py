@@ -47,6 +47,7 @@ class ColourBoxConfig:
     min_threshold: float = 0.5  # Otsu's threshold on the likelihood map is clamped to [min, max]
     max_threshold: float = 0.8
     closing_radius_px: int = 1  # morphological closing of the foreground (bridges gaps <= 2 r px)
+    opening_radius_px: int = 1  # lines <= 2 r px wide are cut off the blob (see _without_lines)
     max_centre_gap_px: float = 4.0  # no blob within this distance of the centre -> no refinement
     min_area_ratio: float = 0.4  # refined box area / previous box area must lie in [min, max]
     max_area_ratio: float = 2.5
@@ -61,7 +62,7 @@ class ColourBoxConfig:
 
     def __post_init__(self) -> None:
         counts = ("bins_per_channel", "histogram_blur_passes", "min_window_px", "closing_radius_px",
-                  "max_border_sides", "box_rim_px", "blob_rim_px")
+                  "opening_radius_px", "max_border_sides", "box_rim_px", "blob_rim_px")
         checks = {name: int(getattr(self, name)) == getattr(self, name) and getattr(self, name) >= 0 for name in counts}
         checks |= {
             "bins_per_channel": checks["bins_per_channel"] and 2 <= self.bins_per_channel <= 64,
@@ -275,9 +276,11 @@ class ColourBoxRefiner:
         if cfg.closing_radius_px > 0:
             side_k = 2 * cfg.closing_radius_px + 1
             fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, np.ones((side_k, side_k), np.uint8))
-        blob = self._blob_at(fg, center - [cols.start, rows.start])
+        centre_win = center - [cols.start, rows.start]
+        blob = self._blob_at(fg, centre_win)
         if blob is None:
             return None
+        blob = self._without_lines(blob, centre_win)
         return self._judge(like, blob, threshold / _LEVELS, box, (cols.start, rows.start), image_rgb.shape[:2],
                            size_reference)
 
@@ -299,6 +302,21 @@ class ColourBoxRefiner:
         if d2[nearest] > reach**2 + _ON_PIXEL_D2:
             return None
         return labels == near[ys[nearest], xs[nearest]]
+
+    def _without_lines(self, blob: npt.NDArray[np.bool_], center_win: FloatArray) -> npt.NDArray[np.bool_]:
+        """The blob less the lines at most 2 opening_radius_px wide that touch it (road markings and kerbs
+        beside a vehicle; the closing joins those 1-2 px off it): its opening's component under the centre,
+        grown back by the radius within the blob, so the vehicle keeps its rim and corners and a line keeps
+        a stub of at most the radius. The blob unchanged when nothing of it survives the opening (a target
+        under 2 r + 1 px wide)."""
+        radius = self.config.opening_radius_px
+        if radius == 0:
+            return blob
+        kernel = np.ones((2 * radius + 1, 2 * radius + 1), np.uint8)
+        core = self._blob_at(cv2.morphologyEx(blob.astype(np.uint8), cv2.MORPH_OPEN, kernel), center_win)
+        if core is None:
+            return blob
+        return blob & (cv2.dilate(core.astype(np.uint8), kernel) > 0)
 
     def _judge(self, like: npt.NDArray[np.uint8], blob: npt.NDArray[np.bool_], threshold: float, previous: BBox,
                origin: tuple[int, int], image_hw: tuple[int, int], size_reference: BBox | None) -> BoxRefinement:

@@ -272,3 +272,70 @@ def test_separation_highest_for_the_box_on_the_car(seed: int) -> None:
                for dx, dy in ((2, 0), (-3, 0), (5, 0), (0, 4), (-4, -3), (3, 5))]
     assert on > max(shifted), (on, shifted)
     assert np.array_equal(refiner.likelihood_lut, lut)
+
+
+ASPHALT_RGB = np.array([105.0, 105.0, 110.0])
+WHITE_RGB = np.array([225.0, 225.0, 220.0])
+
+
+def _with_road_markings(image: np.ndarray, lines: list[tuple[int, int, int, int]]) -> np.ndarray:
+    """The image with 1 px wide marking-white lines (x0, y0, x1, y1) drawn on it (inclusive ends)."""
+    marked = image.copy()
+    for x0, y0, x1, y1 in lines:
+        marked[y0 : y1 + 1, x0 : x1 + 1] = WHITE_RGB.astype(np.uint8)
+    return marked
+
+
+def _sides(xywh: np.ndarray) -> np.ndarray:
+    """(left, top, right, bottom) [px] of an (x, y, w, h) box."""
+    return np.r_[xywh[:2], xywh[:2] + xywh[2:]]
+
+
+@pytest.mark.parametrize("seed", [20, 21, 22])
+def test_refine_white_truck_among_road_markings_box_of_the_truck_not_the_lines(seed: int) -> None:
+    """A white truck seen from above on a road with white 1 px markings: dashes ending on or 1-2 px from
+    its sides (closing bridges those gaps) and one more dash on the far end of a bridged one. The blob's
+    box is the truck's, each side within the opening's radius (the opening drops the lines, its core grown
+    back keeps a stub that long); without the opening the box spans the dashes."""
+    rng = np.random.default_rng(seed)
+    asphalt = ASPHALT_RGB + 8.0 * _smooth_noise(rng, 3.0, 1) + 4.0 * _smooth_noise(rng, 0.7, 3)
+    paint = WHITE_RGB + 4.0 * _smooth_noise(rng, 0.5, 3)
+    centre = np.array([120.0, 128.0])
+    clean, (gt,) = _draw(rng, asphalt, paint, [(centre, CAR_WH_PX, 0.0)])
+    box = BBox.from_array(gt)
+    left, right, top = int(gt[0] + 0.5), int(gt[0] + gt[2] - 0.5), int(gt[1] + 0.5)
+    lines = [
+        (left - 9, top + 20, left - 2, top + 20),  # dash ending 1 px left of the truck
+        (left - 10, top + 6, left - 10, top + 20),  # joins the first dash's far end
+        (right + 3, top + 4, right + 9, top + 4),  # dash ending 2 px right of it
+        (left + 4, top - 6, left + 4, top - 1),  # dash touching its front
+    ]
+    image = _with_road_markings(clean, lines)
+    for opening_radius_px in (1, 0):
+        refiner = ColourBoxRefiner(ColourBoxConfig(opening_radius_px=opening_radius_px))
+        refiner.init(clean, box)
+        ref = refiner.refine(image, centre, box, size_reference=box)
+        assert ref is not None
+        if opening_radius_px:  # the core grown back by the radius keeps at most that much of a line
+            assert ref.accepted, ref.rejection
+            assert np.all(np.abs(_sides(ref.box.as_array()) - _sides(gt)) <= opening_radius_px), (ref.box, gt)
+        else:  # (refused here by the area ratio; a box grown over a few frames passes it)
+            assert ref.box.w_px >= gt[2] + 15 and ref.box.h_px >= gt[3] + 5, (ref.box, gt)
+
+
+@pytest.mark.parametrize("angle_deg", [0.0, 30.0, 45.0, 70.0])
+def test_refine_lone_car_box_the_same_with_and_without_the_opening(angle_deg: float) -> None:
+    """Cutting lines off the blob leaves a lone car's box as it was, at any turn: the opening trims its
+    rim and corners, and growing the core back by the radius within the blob restores them."""
+    rng = np.random.default_rng(23)
+    sand, paint = _sand(rng), _car_paint(rng, RED_RGB)
+    centre = np.array([127.6, 130.2])
+    image, (gt,) = _draw(rng, sand, paint, [(centre, CAR_WH_PX, angle_deg)])
+    boxes = []
+    for opening_radius_px in (1, 0):
+        refiner = ColourBoxRefiner(ColourBoxConfig(opening_radius_px=opening_radius_px))
+        refiner.init(image, BBox.from_array(gt))
+        ref = refiner.refine(image, centre, BBox.from_array(gt))
+        assert ref is not None and ref.accepted, None if ref is None else ref.rejection
+        boxes.append(ref.box.as_array())
+    assert np.array_equal(boxes[0], boxes[1]), boxes
