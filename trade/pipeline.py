@@ -59,6 +59,9 @@ class PipelineConfig:
     single_image_depth: bool = False
     depth_only_ransac: bool = True  # depth-only alignment by 2-point RANSAC; False: plain least squares
     object_height_m: float = 1.5  # prior object height; the plane is lifted by half of it
+    # Refuse a plane fix at which the box's longer side spans less than object_height_m: a ground vehicle is at
+    # least as long as it is tall. A roof a few metres under the camera, taken for the ground, fails it.
+    size_gate: bool = True
     # Lift by the ground mask's object height estimate instead of the prior; off, as it raised the desert's
     # target-depth error (docs/perception.md).
     object_height_from_mask: bool = False
@@ -322,7 +325,7 @@ class TradePipeline:
         if box is not None and plane is not None:
             height = self._object_height_m
             hit = raycast_plane(self.intrinsics, T_world_cam, box.center, plane, height, cfg.raycast)
-            if hit.valid:
+            if hit.valid and self._plausible_size(box, hit.depth_m, height):
                 spread = depth_uncertainty(self.intrinsics, T_world_cam, box.center, solutions or (plane,),
                                            height, cfg.raycast)
                 position, depth = hit.point_world, hit.depth_m
@@ -331,6 +334,14 @@ class TradePipeline:
         timings = replace(timings, plane_ms=plane_ms, fusion_ms=fusion_ms, raycast_ms=raycast_ms,
                           ground_mask_ms=ground_ms)
         return _Fix(position, depth, sigma, plane, int(len(points)), None, timings)
+
+    def _plausible_size(self, box: BBox, depth_m: float, object_height_m: float) -> bool:
+        """Whether the box's longer side spans at least the object's height at `depth_m` (a ground vehicle is at
+        least as long as it is tall), when `PipelineConfig.size_gate` is on."""
+        if not self.config.size_gate:
+            return True
+        K = self.intrinsics
+        return max(box.w_px / K.fx_px, box.h_px / K.fy_px) * depth_m >= object_height_m
 
     def _locate_depth_only(self, image_rgb: npt.NDArray[np.uint8], box: BBox | None, roi: RoiFeatures,
                            T_world_cam: Pose, timings: StageTimings) -> _Fix:

@@ -273,3 +273,40 @@ def test_pipeline_keeps_the_initial_box_where_no_plausible_blob_is():
     unsearched_config = GuidedTrackerConfig(snap_init_box=True, snap_search_fraction=0.0)
     unsearched = TradePipeline(PipelineConfig(tracker=unsearched_config), scene.intrinsics, np.random.default_rng(0))
     assert unsearched.initialise(image, drawn, scene.camera_pose(cam), 0.0).box == drawn
+
+
+ROOF_BELOW_CAMERA_M = 1.0
+
+
+@pytest.mark.parametrize("size_gate", [True, False])
+def test_pipeline_refuses_a_fix_on_a_roof_the_target_could_not_stand_on(size_gate: bool) -> None:
+    """A roof taken for the ground: every plane point lies 1 m under the camera. At that depth the 4 m target's
+    box would span 0.3 m, less than the 1.5 m object height, so the size gate refuses every fix; without it the
+    target is put on the roof. On the true ground the gate lets the fixes through."""
+    class RoofPoints(TradePipeline):
+        def _ground_points(self, image_rgb, box, roi, T_world_cam):
+            points, ground_ms = super()._ground_points(image_rgb, box, roi, T_world_cam)
+            return points + [0.0, 0.0, ALTITUDE_M - ROOF_BELOW_CAMERA_M], ground_ms
+
+    config = PipelineConfig(size_gate=size_gate)
+    scene = PlanarScene.make(size_px=128, fov_deg=90.0, seed=0)
+    pipelines = {"roof": RoofPoints(config, scene.intrinsics, np.random.default_rng(0)),
+                 "ground": TradePipeline(config, scene.intrinsics, np.random.default_rng(0))}
+    fixes = {name: [] for name in pipelines}
+    for k in range(60):
+        t = k / FPS
+        cam = np.array([0.0, 0.0, ALTITUDE_M]) + np.array([2.0, 0.0, 0.0]) * t
+        tgt = np.array([1.0, -1.0]) + np.array([2.2, 0.4]) * t
+        image, pose, gt = scene.render(cam, tgt), scene.camera_pose(cam), scene.target_box(cam, tgt)
+        for name, pipeline in pipelines.items():
+            est = pipeline.initialise(image, BBox.from_array(gt), pose, t) if k == 0 else pipeline.step(image, pose, t)
+            if est.plane is not None and est.tracked:
+                fixes[name].append(est.depth_m)
+    assert len(fixes["roof"]) >= 20 and len(fixes["ground"]) >= 20  # a plane on most late frames
+    depths = np.array(fixes["ground"])
+    assert np.all(np.isfinite(depths)) and np.all(np.abs(depths - ALTITUDE_M) < 1.5)
+    roof = np.array(fixes["roof"])
+    if size_gate:
+        assert np.all(np.isnan(roof)), roof
+    else:
+        assert np.all(roof < ROOF_BELOW_CAMERA_M), roof
