@@ -276,11 +276,11 @@ class ColourBoxRefiner:
         if cfg.closing_radius_px > 0:
             side_k = 2 * cfg.closing_radius_px + 1
             fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, np.ones((side_k, side_k), np.uint8))
-        centre_win = center - [cols.start, rows.start]
-        blob = self._blob_at(fg, centre_win)
+        center_win = center - [cols.start, rows.start]
+        blob = self._blob_at(fg, center_win)
         if blob is None:
             return None
-        blob = self._without_lines(blob, centre_win)
+        blob = self._without_lines(blob, center_win)
         return self._judge(like, blob, threshold / _LEVELS, box, (cols.start, rows.start), image_rgb.shape[:2],
                            size_reference)
 
