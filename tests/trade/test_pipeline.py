@@ -21,21 +21,26 @@ from trade.types import BBox, iou
 ALTITUDE_M = 15.0
 FPS = 30.0
 PITCH_DEG = 30.0  # depth-only sequence: a pitched view, so the ground is not parallel to the image
+CAMERA_VELOCITY_MPS = np.array([2.0, 0.0, 0.0])
+TARGET_START_M = np.array([1.0, -1.0])
+TARGET_VELOCITY_MPS = np.array([2.2, 0.4])
+
+
+def _frame(scene: PlanarScene, k: int):
+    """Frame k of the planar sequence (camera at ALTITUDE_M and the target both driving): t [s], image, camera
+    pose, the target's box and its (x, y) on the ground [m]."""
+    t = k / FPS
+    cam = np.array([0.0, 0.0, ALTITUDE_M]) + CAMERA_VELOCITY_MPS * t
+    tgt = TARGET_START_M + TARGET_VELOCITY_MPS * t
+    return t, scene.render(cam, tgt), scene.camera_pose(cam), scene.target_box(cam, tgt), tgt
 
 
 def _run(config: PipelineConfig, n_frames: int = 90, seed: int = 0):
     scene = PlanarScene.make(size_px=128, fov_deg=90.0, seed=seed)
     pipeline = TradePipeline(config, scene.intrinsics, np.random.default_rng(seed))
-    camera_v = np.array([2.0, 0.0, 0.0])
-    target_v = np.array([2.2, 0.4])
     records = []
     for k in range(n_frames):
-        t = k / FPS
-        cam = np.array([0.0, 0.0, ALTITUDE_M]) + camera_v * t
-        tgt = np.array([1.0, -1.0]) + target_v * t
-        image = scene.render(cam, tgt)
-        pose = scene.camera_pose(cam)
-        box_gt = scene.target_box(cam, tgt)
+        t, image, pose, box_gt, tgt = _frame(scene, k)
         est = (pipeline.initialise(image, BBox.from_array(box_gt), pose, t) if k == 0
                else pipeline.step(image, pose, t))
         records.append((est, box_gt, np.array([tgt[0], tgt[1], 0.0]), t))
@@ -61,7 +66,7 @@ def test_pipeline_tracks_and_localises_target_on_planar_scene():
     pos_err = [np.linalg.norm(est.position_world_m[:2] - truth[:2]) for est, _, truth, _ in late]
     assert np.median(pos_err) < 0.5
     vel = records[-1][0].velocity_world_mps
-    assert np.linalg.norm(vel[:2] - np.array([2.2, 0.4])) < 0.6
+    assert np.linalg.norm(vel[:2] - TARGET_VELOCITY_MPS) < 0.6
 
 
 def test_pipeline_tracks_through_trajectory_prediction_15px_off():
@@ -76,10 +81,7 @@ def test_pipeline_tracks_through_trajectory_prediction_15px_off():
     pipeline = OffsetPrediction(PipelineConfig(object_height_m=0.0), scene.intrinsics, np.random.default_rng(3))
     ious = []
     for k in range(90):
-        t = k / FPS
-        cam = np.array([0.0, 0.0, ALTITUDE_M]) + np.array([2.0, 0.0, 0.0]) * t
-        tgt = np.array([1.0, -1.0]) + np.array([2.2, 0.4]) * t
-        image, pose, gt = scene.render(cam, tgt), scene.camera_pose(cam), scene.target_box(cam, tgt)
+        t, image, pose, gt, _ = _frame(scene, k)
         est = pipeline.initialise(image, BBox.from_array(gt), pose, t) if k == 0 else pipeline.step(image, pose, t)
         ious.append(iou(est.box.as_array(), gt) if est.box is not None else 0.0)
     assert np.mean(np.array(ious) >= 0.5) >= 0.9
@@ -294,10 +296,7 @@ def test_pipeline_refuses_a_fix_on_a_roof_the_target_could_not_stand_on(size_gat
                  "ground": TradePipeline(config, scene.intrinsics, np.random.default_rng(0))}
     fixes = {name: [] for name in pipelines}
     for k in range(60):
-        t = k / FPS
-        cam = np.array([0.0, 0.0, ALTITUDE_M]) + np.array([2.0, 0.0, 0.0]) * t
-        tgt = np.array([1.0, -1.0]) + np.array([2.2, 0.4]) * t
-        image, pose, gt = scene.render(cam, tgt), scene.camera_pose(cam), scene.target_box(cam, tgt)
+        t, image, pose, gt, _ = _frame(scene, k)
         for name, pipeline in pipelines.items():
             est = pipeline.initialise(image, BBox.from_array(gt), pose, t) if k == 0 else pipeline.step(image, pose, t)
             if est.plane is not None and est.tracked:

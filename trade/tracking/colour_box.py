@@ -133,12 +133,16 @@ def _blur_histogram(hist: npt.NDArray[np.float32], passes: int) -> npt.NDArray[n
     return hist
 
 
+def _square_kernel(radius_px: int) -> npt.NDArray[np.uint8]:
+    """The (2 r + 1)-px square structuring element of a morphological operation of radius r."""
+    return np.ones((2 * radius_px + 1, 2 * radius_px + 1), np.uint8)
+
+
 def _eroded(mask: npt.NDArray[np.uint8], radius_px: int) -> npt.NDArray[np.uint8]:
     """Mask eroded by a (2 r + 1)^2 square, outside counting as background; the mask itself if that empties it."""
     if radius_px <= 0:
         return mask
-    side = 2 * radius_px + 1
-    core = cv2.erode(mask, np.ones((side, side), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    core = cv2.erode(mask, _square_kernel(radius_px), borderType=cv2.BORDER_CONSTANT, borderValue=0)
     return core if core.any() else mask
 
 
@@ -274,8 +278,7 @@ class ColourBoxRefiner:
         threshold = float(np.clip(otsu, round(cfg.min_threshold * _LEVELS), round(cfg.max_threshold * _LEVELS)))
         _, fg = cv2.threshold(like, threshold, 1, cv2.THRESH_BINARY)  # fg = L > threshold
         if cfg.closing_radius_px > 0:
-            side_k = 2 * cfg.closing_radius_px + 1
-            fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, np.ones((side_k, side_k), np.uint8))
+            fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, _square_kernel(cfg.closing_radius_px))
         center_win = center - [cols.start, rows.start]
         blob = self._blob_at(fg, center_win)
         if blob is None:
@@ -312,7 +315,7 @@ class ColourBoxRefiner:
         radius = self.config.opening_radius_px
         if radius == 0:
             return blob
-        kernel = np.ones((2 * radius + 1, 2 * radius + 1), np.uint8)
+        kernel = _square_kernel(radius)
         core = self._blob_at(cv2.morphologyEx(blob.astype(np.uint8), cv2.MORPH_OPEN, kernel), center_win)
         if core is None:
             return blob
