@@ -27,13 +27,16 @@ SUCCESS_IOU_THRESHOLDS = np.linspace(0.0, 1.0, 21)
 PRECISION_CENTRE_PX = 20.0  # OTB precision: centre error <= 20 px
 FRAME_DT_S = 1.0 / CAMERA_RATE_HZ  # one env step = one camera frame
 DEPTH_KINDS = ("ground", "target")
+# A frame's ground estimate is off when its depth on the true box ray misses the true ground by more than this [m]:
+# twice the MSAC inlier threshold (0.5 m), so a plane off by it is not the ground the fit's inliers lie on.
+GROUND_OFF_M = 1.0
 
 # Names of the scores `episode_metrics` returns (deterministic: no timing in here).
 METRIC_NAMES = (
     "steps", "visible_fraction", "tracked_fraction", "success_auc", "precision_20px",
     "longest_lost_streak_s", "decoy_switches", "ground_depth_rmse_m", "ground_depth_frames",
     "target_depth_rmse_m", "target_depth_frames", "mean_horizontal_error_m", "crashed",
-    "ground_depth_bias_m", "initial_iou",
+    "ground_depth_bias_m", "ground_depth_off_fraction", "initial_iou",
     "success", "following_rate", "collision_rate", "nre", "dre", "adq",
 )
 # EVT-Bench style: an episode succeeds without a crash and with the drone in the following band (`info["following"]`,
@@ -162,6 +165,13 @@ def depth_bias(infos: Sequence[Info], kind: str) -> float:
     return float(np.mean(err)) if len(err) else float("nan")
 
 
+def depth_off_fraction(infos: Sequence[Info], kind: str, threshold_m: float = GROUND_OFF_M) -> float:
+    """Fraction of the frames with both depths whose |`<kind>_depth_est` - `<kind>_depth_gt`| exceeds
+    `threshold_m` [m] (for the ground: frames whose plane is off the true ground); NaN without such frames."""
+    err = _finite_depth_errors(infos, kind)
+    return float(np.mean(np.abs(err) > threshold_m)) if len(err) else float("nan")
+
+
 def initial_iou(infos: Sequence[Info]) -> float:
     """IoU of the first step's estimate with the true box (a wrong initial box shows here)."""
     return float(infos[0]["iou"]) if infos else float("nan")
@@ -256,6 +266,7 @@ def episode_metrics(infos: Sequence[Info], frame_dt_s: float = FRAME_DT_S) -> di
         "mean_horizontal_error_m": mean_horizontal_distance(infos),
         "crashed": crashed(infos),
         "ground_depth_bias_m": depth_bias(infos, "ground"),
+        "ground_depth_off_fraction": depth_off_fraction(infos, "ground"),
         "initial_iou": initial_iou(infos),
         "success": success(infos),
         "following_rate": following_rate(infos),

@@ -97,6 +97,14 @@ def test_depth_rmse_ignores_frames_missing_either_depth():
     np.testing.assert_array_equal(metrics.depth_errors_m(infos, "ground"), [1.0, math.nan, -3.0])
 
 
+def test_ground_off_fraction_counts_frames_beyond_the_threshold_among_those_with_both_depths():
+    infos = [info(g=(10.5, 10.0)), info(g=(math.nan, 10.0)), info(g=(7.0, 10.0)), info(g=(11.2, 10.0))]
+    assert metrics.depth_off_fraction(infos, "ground") == pytest.approx(2 / 3)  # 1 m: -3 and +1.2 are off
+    assert metrics.depth_off_fraction(infos, "ground", threshold_m=2.0) == pytest.approx(1 / 3)
+    assert math.isnan(metrics.depth_off_fraction([info(g=(math.nan, 10.0))], "ground"))
+    assert metrics.episode_metrics(infos)["ground_depth_off_fraction"] == pytest.approx(2 / 3)
+
+
 def test_depth_rmse_unknown_kind_raises_value_error():
     with pytest.raises(ValueError, match="kind"):
         metrics.depth_rmse([info()], "sky")

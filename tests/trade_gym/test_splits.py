@@ -142,6 +142,22 @@ def test_unseen_suite_flies_each_evaluation_world_once_per_configuration():
     cli.check_worlds("unseen", runs)
 
 
+def test_depth_finder_flies_every_evaluation_world_and_forty_training_worlds_per_scene_and_configuration():
+    runs = expand_suite("unseen-depth", Selection(), ("scripted", "learned"))
+    configs = {(r.scene, r.policy, r.perception, r.pose_source) for r in runs}
+    assert configs == {(s, p, "trade", pose) for s in SCENE_NAMES for p in ("scripted", "learned")
+                       for pose in ("gt", "vio")}
+    for config in configs:
+        mine = [r for r in runs if (r.scene, r.policy, r.perception, r.pose_source) == config]
+        assert [r.world_seed for r in mine if r.group == "depth_evaluation"] == list(EVALUATION.seeds())
+        training = [r.world_seed for r in mine if r.group == "depth_training"]
+        assert len(training) >= 40 and all(seed in TRAINING for seed in training)
+    assert all(r.kind == "unseen" and "init_box_perturb_px" not in r.env_kwargs() for r in runs)  # clean start
+    cli.check_worlds("unseen-depth", runs)
+    with pytest.raises(cli.UsageError, match="development|only"):  # never a development world
+        cli.check_worlds("unseen-depth", expand_suite("unseen-depth", Selection(seeds=(0, 0)), ("scripted",)))
+
+
 @pytest.mark.parametrize("argv", [
     ["--suite", "quick", "--seeds", str(EVALUATION.first), str(EVALUATION.first + 1)],
     ["--seeds", str(EVALUATION.last), str(EVALUATION.last + 5)],  # a custom grid overlapping the split

@@ -13,14 +13,14 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from trade_gym.bench import plots, reference, report
+from trade_gym.bench import depth_strips, plots, reference, report
 from trade_gym.bench.executors import (BACKENDS, DEFAULT_RAY_ADDRESS, RAY_LOCAL, BackendUnavailable, Executor,
                                        LocalExecutor, RayExecutor, check_ray_address)
 from trade_gym.bench.policies import POLICY_NAMES, available_policies, learned_unavailable_reason
 from trade_gym.bench.results import (SERIES_FILE, build_document, collect_meta, load_results, load_schema,
                                      to_json_safe, write_json, write_series)
 from trade_gym.bench.runner import RunResult, run_all, run_spec
-from trade_gym.bench.splits import EVALUATION
+from trade_gym.bench.splits import EVALUATION, TRAINING
 from trade_gym.bench.suites import (BOOL_SWITCHES, EVALUATION_SUITES, SUITE_JOBS, SUITES, RunSpec, Selection,
                                     expand_suite)
 from trade_gym.bench.summary import summarise
@@ -43,7 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "evaluation worlds per scene, ~1.5 h), tuning (the unseen grid on 20 development worlds, to tune "
                    "on), latency (full TRADE, scripted and learned followers, every scene, fixed perception latency "
                    "0-400 ms, 30 runs, ~15 min), breadth (every decoy tier x target motion x appearance, scripted and "
-                   "learned, TRADE and DCF, one evaluation world per scene, 216 runs, ~31 min with --jobs 2), full "
+                   "learned, TRADE and DCF, one evaluation world per scene, 216 runs, ~31 min with --jobs 2), unseen-depth "
+                   "(the depth failure finder: ground depth on 40 training and the 20 evaluation worlds per scene, "
+                   "720 runs; a strip of frames per failed world), full "
                    "(paper tables at full length plus all followers, hours)")
     p.add_argument("--tables", nargs="+", metavar="GROUP", help="groups of the suite to run (see --list); with "
                    "--report, the groups of the earlier run to render (and --scenes its scenes)")
@@ -132,12 +134,13 @@ def validate_runs(specs: Sequence[RunSpec]) -> None:
 
 
 def check_worlds(suite: str | None, specs: Sequence[RunSpec]) -> None:
-    """Evaluation worlds are flown by the evaluation suites only, and those fly nothing else."""
+    """Evaluation worlds are flown by the evaluation suites only, and those fly nothing else but training worlds."""
     for spec in specs:
         on_evaluation = spec.world_seed in EVALUATION
-        if suite in EVALUATION_SUITES and not on_evaluation:
-            raise UsageError(f"suite {suite} flies evaluation worlds {EVALUATION.first}..{EVALUATION.last} only; "
-                             f"run {spec.run_id} is on world {spec.world_seed}")
+        if suite in EVALUATION_SUITES and not (on_evaluation or spec.world_seed in TRAINING):
+            raise UsageError(f"suite {suite} flies evaluation worlds {EVALUATION.first}..{EVALUATION.last} (and "
+                             f"training worlds from {TRAINING.first}) only; run {spec.run_id} is on world "
+                             f"{spec.world_seed}")
         if suite not in EVALUATION_SUITES and on_evaluation:
             raise UsageError(f"run {spec.run_id} is on world {spec.world_seed}, an evaluation world "
                              f"({EVALUATION.first}..{EVALUATION.last}); only --suite "
@@ -255,8 +258,10 @@ def _progress(start: float) -> Callable[[int, int, RunResult], None]:
 VIDEO_PERCEPTION = "trade"
 
 
-def write_outputs(args: argparse.Namespace, results: list[RunResult], meta: dict[str, Any]) -> dict:
-    """results.json, results.md, the plots and the optional video; returns the JSON document."""
+def write_outputs(args: argparse.Namespace, results: list[RunResult], meta: dict[str, Any],
+                  strips: bool = True) -> dict:
+    """results.json, results.md, the plots, the optional video and (`strips`) a strip of frames for each per-world
+    run whose ground depth failed (`trade_gym.bench.depth_strips`, flown again); returns the JSON document."""
     out: Path = args.out
     summary = summarise(results)
     written = []
@@ -264,6 +269,8 @@ def write_outputs(args: argparse.Namespace, results: list[RunResult], meta: dict
         runs = [r for r in results if r.spec.group == group]
         written += plots.plot_group(runs, group, runs[0].spec.depth_kind, out)
     written += plots.plot_suite(results, out)
+    if strips:
+        written += depth_strips.write_strips(results, out)
     video = None
     flown = [r for r in results if r.error is None]
     # the video shows the first run with the TRADE stack (its overlays), else the first run at all
@@ -272,7 +279,7 @@ def write_outputs(args: argparse.Namespace, results: list[RunResult], meta: dict
         from trade_gym.bench.video import record_video
 
         video = record_video(shown.spec, out / "video").name
-    names = [p.name for p in written]
+    names = [p.relative_to(out).as_posix() for p in written]
     document = build_document(results, summary, meta, names, video)
     titles = {g.name: g.title for g in SUITES.get(meta["suite"] or "", ())}
     failures = [f"{r.spec.run_id}: {r.error}" for r in results if r.error]
@@ -320,7 +327,7 @@ def render_report(args: argparse.Namespace) -> int:
             raise UsageError(f"--scenes {' '.join(unknown)}: not in {source} (its scenes: {', '.join(present)})")
         results = [r for r in results if r.spec.scene in args.scenes]
     args.out.mkdir(exist_ok=True)
-    write_outputs(args, results, meta)
+    write_outputs(args, results, meta, strips=False)
     print(f"{len(results)} runs of {source} -> {args.out / 'results.md'}")
     return 0
 

@@ -76,6 +76,7 @@ TOLERANCES: dict[str, Tolerance] = {
     "mean_horizontal_error_m": FLOAT_DRIFT,
     "crashed": EXACT,
     "ground_depth_bias_m": FLOAT_DRIFT,
+    "ground_depth_off_fraction": FLOAT_DRIFT,
     "initial_iou": FLOAT_DRIFT,
     "success": EXACT,
     "following_rate": FLOAT_DRIFT,

@@ -10,6 +10,7 @@ from typing import Any
 
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M, FAIL_TRACKED_FRACTION
 from trade_gym.bench.summary import config_label
+from trade_gym.metrics import GROUND_OFF_M
 
 Record = dict[str, Any]
 MISSING = "–"
@@ -148,20 +149,26 @@ def unseen_pivot(records: Sequence[Record]) -> list[str]:
     """Per scene and configuration: pooled ground-depth RMSE with its frame count, the per-world median,
     90th percentile and worst RMSE, tracking, and how many worlds failed; then each failed world's cause."""
     header = ["scene", "configuration", "worlds", "ground RMSE pooled [m]", "frames", "per-world median / p90 / "
-              "worst [m]", "visible (mean)", "tracked (mean, median)", "switches", "failed worlds"]
+              "worst [m]", f"plane off > {GROUND_OFF_M:g} m (mean / worst)", "visible (mean)",
+              "tracked (mean, median)", "switches", "failed worlds"]
     rows, failed = [], []
     for r in records:
         m, rmse = r["metrics"], r["metrics"]["ground_depth_rmse_m"]
+        off = m.get("ground_depth_off_fraction", {"n": 0})
         rows.append([r["scene"], config_label(r), str(r["n_runs"] - r["n_failed"]),
                      fmt(r["pooled_ground_depth_rmse_m"]), str(r["pooled_ground_depth_frames"]),
-                     " / ".join(fmt(rmse[k]) for k in ("median", "p90", "max")), fmt(m["visible_fraction"]["mean"]),
+                     " / ".join(fmt(rmse[k]) for k in ("median", "p90", "max")),
+                     f"{fmt(off['mean'])} / {fmt(off['max'])}" if off["n"] else MISSING,
+                     fmt(m["visible_fraction"]["mean"]),
                      f"{fmt(m['tracked_fraction']['mean'])}, {fmt(m['tracked_fraction']['median'])}",
                      str(r["decoy_switches_total"]), f"{len(r['failed_runs'])} of {r['n_runs']}"])
         failed += [f"- {r['scene']}, {config_label(r)}, world {f['seed']}: {f['cause']}" for f in r["failed_runs"]]
     lines = table(header, rows)
     lines += ["", f"A world fails when its ground-depth RMSE exceeds {FAIL_GROUND_RMSE_M:g} m (or it has no ground "
               f"depth) or the target is tracked in fewer than {FAIL_TRACKED_FRACTION:g} of its visible frames; "
-              "the cause is classified from the run's metrics (`trade_gym.bench.failures`).", ""]
+              "the cause is classified from the run's metrics (`trade_gym.bench.failures`). Plane off: the fraction "
+              f"of a world's frames whose ground estimate misses the true ground by more than {GROUND_OFF_M:g} m "
+              "on the true box's ray.", ""]
     return lines + (["Failed worlds:", ""] + failed if failed else ["No world failed."])
 
 

@@ -10,7 +10,7 @@ import itertools
 from dataclasses import dataclass, fields
 from typing import Any
 
-from trade_gym.bench.splits import DEVELOPMENT, EVALUATION
+from trade_gym.bench.splits import DEVELOPMENT, EVALUATION, TRAINING
 from trade_gym.config import APPEARANCE_MODES, CAMERA_RATE_HZ, SCENE_NAMES, TARGET_MOTIONS, EnvConfig
 
 Kwargs = tuple[tuple[str, Any], ...]  # sorted (name, value) pairs: hashable env keyword arguments
@@ -41,6 +41,10 @@ LATENCY_WORLDS = (0, 0)  # development world seeds (reset seed = world seed), fi
 # scene meets the same world (paired comparisons; `--seeds 5000 5004` widens it to more worlds).
 BREADTH_TIERS = ("none", "parked", "ambiguous")  # easiest first
 BREADTH_WORLDS = (EVALUATION.first, EVALUATION.first)
+# The depth failure finder: ground depth under full TRADE (both followers, gt and vio pose, clean start) on every
+# evaluation world and on training worlds, whose group is the one to tune on (`--tables depth_training`).
+DEPTH_FINDER_TRAINING_WORLDS = (TRAINING.first, TRAINING.first + 39)
+DEPTH_FINDER_STEPS = 300
 
 
 @dataclass(frozen=True)
@@ -237,6 +241,14 @@ def _breadth_groups(steps: int, camera_size: int) -> tuple[GroupSpec, ...]:
         for tier in BREADTH_TIERS)
 
 
+def _depth_finder_groups(steps: int, camera_size: int) -> tuple[GroupSpec, ...]:
+    return tuple(
+        GroupSpec(f"depth_{which}", "unseen", f"Depth failure finder, {which} worlds: ground depth under full TRADE, "
+                  "scripted and learned followers, gt and vio pose, clean start, one run per world", ALL_SCENES,
+                  ("scripted", "learned"), ("trade",), ("gt", "vio"), worlds, steps, camera_size)
+        for which, worlds in (("training", DEPTH_FINDER_TRAINING_WORLDS), ("evaluation", UNSEEN_WORLDS)))
+
+
 PAPER_STEPS, FULL_STEPS = 450, 900  # 15 s sequences (about an hour on 2 cores); the env's full 30 s
 PAPER_CAMERA_PX = 256
 
@@ -247,15 +259,18 @@ SUITES: dict[str, tuple[GroupSpec, ...]] = {
     "tuning": _unseen_groups(PAPER_STEPS, PAPER_CAMERA_PX, "tuning", TUNING_WORLDS, "development"),
     "latency": _latency_groups(PAPER_STEPS, PAPER_CAMERA_PX),
     "breadth": _breadth_groups(PAPER_STEPS, PAPER_CAMERA_PX),
+    "unseen-depth": _depth_finder_groups(DEPTH_FINDER_STEPS, PAPER_CAMERA_PX),
     "full": _paper_groups(FULL_STEPS, PAPER_CAMERA_PX) + (
         GroupSpec("policies", "follow", "Followers on oracle and TRADE perception",
                   ALL_SCENES, ("scripted", "learned", "hover", "random"), ("oracle", "trade"), ("gt",),
                   TRACKING_RUNS, FULL_STEPS, PAPER_CAMERA_PX),
     ),
 }
-SUITE_JOBS = {"quick": 2, "paper": 2, "unseen": 2, "tuning": 2, "latency": 2, "breadth": 2, "full": 2}  # default --jobs per suite
-# Suites that fly evaluation worlds; no other suite or grid may (`trade_gym.bench.splits`).
-EVALUATION_SUITES = ("unseen", "breadth")
+SUITE_JOBS = {"quick": 2, "paper": 2, "unseen": 2, "tuning": 2, "latency": 2, "breadth": 2, "unseen-depth": 2,
+              "full": 2}  # default --jobs per suite
+# Suites that fly evaluation worlds; no other suite or grid may (`trade_gym.bench.splits`). Besides them, they may
+# fly training worlds (the depth finder's group to tune on), never development worlds.
+EVALUATION_SUITES = ("unseen", "breadth", "unseen-depth")
 
 # A run without --suite: one grid of the chosen axes, these defaults where nothing was chosen.
 CUSTOM_DEFAULTS = GroupSpec("custom", "custom", "Custom grid", ALL_SCENES, ("scripted",), ("oracle",), ("gt",),
