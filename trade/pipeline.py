@@ -62,6 +62,9 @@ class PipelineConfig:
     # Refuse a plane fix at which the box's longer side spans less than object_height_m: a ground vehicle is at
     # least as long as it is tall. A roof a few metres under the camera, taken for the ground, fails it.
     size_gate: bool = True
+    # A plane the size gate refuses is not the ground the target stands on: forget it (and the fused points that
+    # made it), so the next frames' points refit the ground instead of being gated out as off the roof's plane.
+    size_gate_drops_plane: bool = True
     # Lift by the ground mask's object height estimate instead of the prior; off, as it raised the desert's
     # target-depth error (docs/perception.md).
     object_height_from_mask: bool = False
@@ -330,6 +333,9 @@ class TradePipeline:
                                            height, cfg.raycast)
                 position, depth = hit.point_world, hit.depth_m
                 sigma = spread.sigma_m if spread.valid else cfg.raycast.min_depth_sigma_m
+            elif hit.valid and cfg.size_gate_drops_plane:
+                self.fusion.reset()
+                plane, solutions = None, ()
         raycast_ms = (time.perf_counter() - start) * 1e3
         timings = replace(timings, plane_ms=plane_ms, fusion_ms=fusion_ms, raycast_ms=raycast_ms,
                           ground_mask_ms=ground_ms)

@@ -33,6 +33,10 @@ class TemporalFusionConfig:
     min_points: int = 10
     max_gated_frames: int = 30  # 1 s at 30 fps
     max_age_frames: int = 45  # 1.5 s at 30 fps
+    # Re-initialise from a gated-out frame whose own plane (its multi-RANSAC inliers) has more inliers than the
+    # fused plane: a plane fitted to a handful of roof points is outvoted by the first frame of street points
+    # instead of gating them out for max_gated_frames; a plane of hundreds of points holds through a passing roof.
+    outvoted_reinit: bool = True
     ransac: MultiRansacConfig = field(default_factory=MultiRansacConfig)
 
     def __post_init__(self) -> None:
@@ -117,6 +121,14 @@ class TemporalPlaneFusion:
         fit = multi_ransac(points, self.config.ransac, self._rng, query_xy)
         return points[:0] if fit is None else points[fit.inlier_mask]
 
+    def _outvoting_inliers(self, points: FloatArray, query_xy: FloatArray | None) -> FloatArray | None:
+        """The gated-out frame's own plane inliers when they outnumber the fused plane's (`outvoted_reinit`), else
+        None. A frame with no more points than the fused plane's inliers cannot outvote it and is not fitted."""
+        if not self.config.outvoted_reinit or points.shape[0] <= self._plane.n_inliers:
+            return None
+        own = self._bootstrap_inliers(points, query_xy)
+        return own if own.shape[0] > self._plane.n_inliers else None
+
     def update(self, points_world: FloatArray, query_xy: FloatArray | None = None) -> FusionResult:
         """points_world: (N, 3) world [m] ground inliers of this frame; query_xy: (2,) world [m]
         passed to multi-RANSAC's lowest-plane tie-break (default: buffer centroid)."""
@@ -131,10 +143,11 @@ class TemporalPlaneFusion:
             accepted = pts[np.abs(self._plane.signed_distance(pts)) <= gate_m]
             gated_out = pts.shape[0] >= self.config.min_points > accepted.shape[0]
             self._n_gated_frames = self._n_gated_frames + 1 if gated_out else 0
-            if gated_out and 0 < self.config.max_gated_frames <= self._n_gated_frames:
-                self.reset()  # the ground moved for good: start over from this frame
+            own = self._outvoting_inliers(pts, query_xy) if gated_out else None
+            if own is not None or (gated_out and 0 < self.config.max_gated_frames <= self._n_gated_frames):
+                self.reset()  # the ground moved for good, or the plane was outvoted: start over from this frame
                 gate_m, reinitialised = float("inf"), True
-                accepted = self._bootstrap_inliers(pts, query_xy)
+                accepted = own if own is not None else self._bootstrap_inliers(pts, query_xy)
         n_acc = accepted.shape[0]
         if n_acc < self.config.min_points:
             return self._result(0, n_in, reused=self._plane is not None, reinit=reinitialised, gate_m=gate_m)

@@ -283,29 +283,59 @@ ROOF_BELOW_CAMERA_M = 1.0
 @pytest.mark.parametrize("size_gate", [True, False])
 def test_pipeline_refuses_a_fix_on_a_roof_the_target_could_not_stand_on(size_gate: bool) -> None:
     """A roof taken for the ground: every plane point lies 1 m under the camera. At that depth the 4 m target's
-    box would span 0.3 m, less than the 1.5 m object height, so the size gate refuses every fix; without it the
-    target is put on the roof. On the true ground the gate lets the fixes through."""
-    class RoofPoints(TradePipeline):
-        def _ground_points(self, image_rgb, box, roi, T_world_cam):
-            points, ground_ms = super()._ground_points(image_rgb, box, roi, T_world_cam)
-            return points + [0.0, 0.0, ALTITUDE_M - ROOF_BELOW_CAMERA_M], ground_ms
-
+    box would span 0.3 m, less than the 1.5 m object height, so the size gate refuses every fix and drops the plane
+    (`size_gate_drops_plane`); without it the target is put on the roof. On the true ground the gate lets the
+    fixes through."""
     config = PipelineConfig(size_gate=size_gate)
     scene = PlanarScene.make(size_px=128, fov_deg=90.0, seed=0)
-    pipelines = {"roof": RoofPoints(config, scene.intrinsics, np.random.default_rng(0)),
+    pipelines = {"roof": _RoofPoints(config, scene.intrinsics, np.random.default_rng(0)),
                  "ground": TradePipeline(config, scene.intrinsics, np.random.default_rng(0))}
     fixes = {name: [] for name in pipelines}
     for k in range(60):
         t, image, pose, gt, _ = _frame(scene, k)
         for name, pipeline in pipelines.items():
             est = pipeline.initialise(image, BBox.from_array(gt), pose, t) if k == 0 else pipeline.step(image, pose, t)
-            if est.plane is not None and est.tracked:
-                fixes[name].append(est.depth_m)
-    assert len(fixes["roof"]) >= 20 and len(fixes["ground"]) >= 20  # a plane on most late frames
-    depths = np.array(fixes["ground"])
-    assert np.all(np.isfinite(depths)) and np.all(np.abs(depths - ALTITUDE_M) < 1.5)
+            if est.tracked:
+                fixes[name].append((est.depth_m, est.plane is not None))
+    ground = np.array([depth for depth, has_plane in fixes["ground"] if has_plane])
+    assert len(ground) >= 20 and np.all(np.abs(ground - ALTITUDE_M) < 1.5)  # a plane on most late frames
     roof = np.array(fixes["roof"])
     if size_gate:
-        assert np.all(np.isnan(roof)), roof
+        assert np.all(np.isnan(roof[:, 0])) and not np.any(roof[:, 1]), roof  # no fix, and no roof plane held
     else:
-        assert np.all(roof < ROOF_BELOW_CAMERA_M), roof
+        on_plane = roof[roof[:, 1] > 0, 0]
+        assert len(on_plane) >= 20 and np.all(on_plane < ROOF_BELOW_CAMERA_M), roof
+
+
+class _RoofPoints(TradePipeline):
+    """Every plane point lifted onto a roof ROOF_BELOW_CAMERA_M under the camera while `on_roof` is set."""
+
+    on_roof = True
+
+    def _ground_points(self, image_rgb, box, roi, T_world_cam):
+        points, ground_ms = super()._ground_points(image_rgb, box, roi, T_world_cam)
+        lift = ALTITUDE_M - ROOF_BELOW_CAMERA_M if self.on_roof else 0.0
+        return points + [0.0, 0.0, lift], ground_ms
+
+
+@pytest.mark.parametrize("drops", [True, False])
+def test_pipeline_that_drops_a_roof_plane_fixes_on_the_ground_as_soon_as_its_points_come(drops: bool) -> None:
+    """Roof points for 30 frames, then the true ground's: with the refused roof plane dropped, the first ground
+    frames make the plane and the fixes are at the true depth within a few frames; kept, the fused roof plane
+    gates the ground points out for the fusion's max_gated_frames (here longer than the run)."""
+    roof_frames, n_frames = 30, 60
+    fusion = replace(PipelineConfig().fusion, outvoted_reinit=False, max_gated_frames=n_frames)
+    config = PipelineConfig(size_gate_drops_plane=drops, fusion=fusion)
+    scene = PlanarScene.make(size_px=128, fov_deg=90.0, seed=0)
+    pipeline = _RoofPoints(config, scene.intrinsics, np.random.default_rng(0))
+    depths = []
+    for k in range(n_frames):
+        pipeline.on_roof = k < roof_frames
+        t, image, pose, gt, _ = _frame(scene, k)
+        est = pipeline.initialise(image, BBox.from_array(gt), pose, t) if k == 0 else pipeline.step(image, pose, t)
+        depths.append(est.depth_m if est.tracked and est.plane is not None else np.nan)
+    after = np.array(depths[roof_frames + 5:])
+    if drops:
+        assert np.all(np.abs(after - ALTITUDE_M) < 1.5), after
+    else:
+        assert not np.any(np.abs(after - ALTITUDE_M) < 1.5), after

@@ -98,6 +98,30 @@ def test_fusion_ground_that_moved_for_good_reinitialises_after_max_gated_frames(
     assert results[-1].plane is not None and abs(results[-1].plane.height_at([0.0, 0.0]) - 5.0) < 0.1
 
 
+@pytest.mark.parametrize("outvoted_reinit", [True, False])
+def test_fusion_plane_of_a_few_roof_points_is_outvoted_by_the_first_street_frame_with_more(outvoted_reinit) -> None:
+    """A first plane from 6 points on a roof 20 m up, then frames of 30 street points: they are gated out and
+    outnumber the roof plane's inliers, so the fusion starts over on the street at once (without the vote, the
+    street stays gated out until max_gated_frames)."""
+    rng = np.random.default_rng(0)
+    config = TemporalFusionConfig(min_points=6, outvoted_reinit=outvoted_reinit)
+    fusion = TemporalPlaneFusion(config, np.random.default_rng(1))
+    roof = fusion.update(ground_frame(rng, z_m=20.0, n=6))
+    assert roof.plane is not None and roof.plane.n_inliers == 6
+    street = fusion.update(ground_frame(rng, n=30))
+    assert street.reinitialised is outvoted_reinit
+    if outvoted_reinit:
+        assert abs(street.plane.height_at([0.0, 0.0])) < 0.1 and street.n_buffered == 30
+    else:
+        assert street.reused and street.plane is roof.plane and street.n_accepted == 0
+
+
+def test_fusion_plane_of_many_frames_is_not_outvoted_by_one_frame_off_it() -> None:
+    fusion, rng = steady_fusion()  # 5 frames of 120 points
+    res = fusion.update(ground_frame(rng, z_m=5.0, n=2 * N_PER_FRAME))
+    assert res.reused and not res.reinitialised and abs(res.plane.height_at([0.0, 0.0])) < 0.05
+
+
 def test_fusion_reset_forgets_plane_and_buffer() -> None:
     fusion, _ = steady_fusion()
     fusion.reset()
