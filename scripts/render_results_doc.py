@@ -69,7 +69,7 @@ def run_report(folder: str) -> list[str]:
     source = RESULTS_DIR / folder / "results.json"
     results, meta = load_results(source)
     titles = {g.name: g.title for g in SUITES.get(meta["suite"] or "", ())}
-    plots = sorted(p.name for p in (RESULTS_DIR / folder).glob("*.png"))
+    plots = sorted(p.relative_to(RESULTS_DIR / folder).as_posix() for p in (RESULTS_DIR / folder).rglob("*.png"))
     failures = [f"{r.spec.run_id}: {r.error}" for r in results if r.error]
     body = render_markdown(summarise(results), meta, titles, failures, plots).splitlines()
     out = [f"Command: `trade-bench {' '.join(meta['argv'])}`.", ""]
