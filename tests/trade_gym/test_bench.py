@@ -3,6 +3,7 @@ end-to-end run (oracle perception) checked for schema validity and serial/parall
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import subprocess
@@ -404,6 +405,15 @@ def test_schema_enums_name_every_suite_group_kind_and_axis_of_the_code():
     assert set(config["policy"]["enum"]) == set(POLICY_NAMES)
     assert set(config["perception"]["enum"]) == set(PERCEPTION_MODES)
     assert set(config["pose_source"]["enum"]) == set(POSE_SOURCES)
+
+
+def test_depth_finder_document_with_its_strips_is_schema_valid():
+    result = _unseen_result("city", 10_034, 12.3, -5.8, 1.0)
+    results = [dataclasses.replace(result, metrics=result.metrics | {"success": None, "ground_depth_off_fraction": 0.4})]
+    meta = results_module.collect_meta("unseen-depth", ["--suite", "unseen-depth"], 2, len(results), 1.0)
+    doc = to_json_safe(results_module.build_document(results, summarise(results), meta,
+                                                     ["strips/strip_unseen_city.png"], None))
+    jsonschema.validate(doc, load_schema())
 
 
 def test_breadth_suite_document_is_schema_valid():
