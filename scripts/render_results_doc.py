@@ -22,6 +22,7 @@ from trade_gym.bench.summary import summarise  # noqa: E402
 
 DOC = ROOT / "docs" / "results.md"
 RESULTS_DIR = ROOT / "docs" / "results"
+FIGURE_SUFFIXES = (".png", ".jpg")  # plots, and the depth finder's strips
 # (section title, what it is, its runs: folders under docs/results), in the order the page shows them
 SECTIONS = (
     ("Unseen worlds (evaluation split)",
@@ -69,7 +70,8 @@ def run_report(folder: str) -> list[str]:
     source = RESULTS_DIR / folder / "results.json"
     results, meta = load_results(source)
     titles = {g.name: g.title for g in SUITES.get(meta["suite"] or "", ())}
-    plots = sorted(p.relative_to(RESULTS_DIR / folder).as_posix() for p in (RESULTS_DIR / folder).rglob("*.png"))
+    plots = sorted(p.relative_to(RESULTS_DIR / folder).as_posix() for p in (RESULTS_DIR / folder).rglob("*")
+                   if p.suffix in FIGURE_SUFFIXES)
     failures = [f"{r.spec.run_id}: {r.error}" for r in results if r.error]
     body = render_markdown(summarise(results), meta, titles, failures, plots).splitlines()
     out = [f"Command: `trade-bench {' '.join(meta['argv'])}`.", ""]

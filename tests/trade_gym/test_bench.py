@@ -412,7 +412,7 @@ def test_depth_finder_document_with_its_strips_is_schema_valid():
     results = [dataclasses.replace(result, metrics=result.metrics | {"success": None, "ground_depth_off_fraction": 0.4})]
     meta = results_module.collect_meta("unseen-depth", ["--suite", "unseen-depth"], 2, len(results), 1.0)
     doc = to_json_safe(results_module.build_document(results, summarise(results), meta,
-                                                     ["strips/strip_unseen_city.png"], None))
+                                                     ["strips/strip_unseen_city.jpg"], None))
     jsonschema.validate(doc, load_schema())
 
 

@@ -48,15 +48,16 @@ def test_strip_of_a_flown_run_is_a_row_of_captioned_frames(tmp_path):
     spec = RunSpec("g", "unseen", "desert", "scripted", "trade", "gt", 10_000, steps, camera_px)
     path = depth_strips.write_strip(spec, tmp_path / depth_strips.strip_name(spec))
     image = cv2.imread(str(path))
-    assert image is not None and path.name == "strip_g_desert_scripted_trade_gt_seed10000.png"
+    assert image is not None and path.name == "strip_g_desert_scripted_trade_gt_seed10000.jpg"
     tiles = depth_strips.STRIP_FRAMES
     assert image.shape[0] == camera_px + depth_strips.CAPTION_HEIGHT_PX
     assert image.shape[1] == tiles * camera_px + (tiles - 1) * depth_strips.STRIP_GAP_PX
     caption = image[camera_px:]
     assert caption.max() > 0  # text was written under each frame
+    assert path.read_bytes()[:2] == b"\xff\xd8"  # JPEG (a PNG strip is about five times larger)
 
 
 def test_strip_without_any_ground_estimate_raises_naming_the_run(tmp_path, monkeypatch):
     spec = RunSpec("g", "unseen", "desert", "scripted", "trade", "gt", 10_000, 3, 64)
     with pytest.raises(ValueError, match="g/desert/scripted/trade/gt/seed10000"):
-        depth_strips.write_strip(spec, tmp_path / "s.png")
+        depth_strips.write_strip(spec, tmp_path / "s.jpg")
