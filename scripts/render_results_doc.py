@@ -32,6 +32,14 @@ SECTIONS = (
      "follower. Then Table 1's ablation rows on the first 5 evaluation worlds (the `unseen_table1` group of "
      "an unseen run, rendered with `trade-bench --report DIR --tables unseen_table1`; its commit may be an "
      "earlier one than the main table's: each names its own).", ("unseen", "unseen_table1")),
+    ("Depth failure finder (training and evaluation worlds)",
+     "`trade-bench --suite unseen-depth`: ground depth under full TRADE on every evaluation world and on training "
+     "worlds 10000-10039 (the ones to tune on), flown by the scripted and the learned follower with ground-truth "
+     "and VIO pose from a clean start, 300 frames at 256 px; one run per world, each report rendered for its group "
+     "and scenes. \"Plane off\" is the fraction of a world's frames whose ground estimate misses the true ground "
+     "by more than 1 m. Each world whose ground RMSE exceeds 2 m has a strip of its worst frames (ground mask "
+     "cyan, plane inliers circled, estimated and true ground depth under each frame).",
+     ("unseen_depth/evaluation", "unseen_depth/training_city", "unseen_depth/training_desert_mountain")),
     ("Development world (the paper's reproduction)",
      "The paper's tables on one development world per scene (`world_seed=0`, the world the stack's parameters "
      "were tuned on), 5 runs per cell for depth and 10 for tracking, each with its own start shift, box "
