@@ -14,8 +14,9 @@ from trade_gym.bench.suites import RunSpec
 from trade_gym.metrics import GROUND_OFF_M, METRIC_NAMES
 
 
-def _result(kind: str, rmse: float, perception: str = "trade") -> runner.RunResult:
-    metrics = dict.fromkeys(METRIC_NAMES, 0.0) | {"ground_depth_rmse_m": rmse, "ground_depth_bias_m": -rmse}
+def _result(kind: str, rmse: float, perception: str = "trade", frames: int = 250) -> runner.RunResult:
+    metrics = dict.fromkeys(METRIC_NAMES, 0.0) | {"ground_depth_rmse_m": rmse, "ground_depth_bias_m": -rmse,
+                                                   "ground_depth_frames": frames}
     spec = RunSpec("g", kind, "city", "scripted", perception, "gt", 10_000, 300, 256)
     return runner.RunResult(spec, metrics, runner.RunTiming(1.0, 0.1, 0.9, 300.0), None)
 
@@ -23,7 +24,8 @@ def _result(kind: str, rmse: float, perception: str = "trade") -> runner.RunResu
 def test_only_per_world_runs_whose_ground_depth_failed_get_a_strip():
     failed = _result("unseen", FAIL_GROUND_RMSE_M + 1.0)
     results = [failed, _result("unseen", FAIL_GROUND_RMSE_M - 0.5), _result("table1", FAIL_GROUND_RMSE_M + 1.0),
-               _result("unseen", math.nan, perception="oracle")]
+               _result("unseen", math.nan, perception="oracle"),
+               _result("unseen", math.nan, frames=0)]  # no ground estimate at all: no frame to show
     assert depth_strips.failed_depth_runs(results) == [failed]
 
 

@@ -31,9 +31,11 @@ STRIP_JPEG_QUALITY = 85  # a 4-frame strip at 256 px: about 0.1 MB as JPEG, 0.5 
 
 
 def failed_depth_runs(results: Sequence[RunResult]) -> list[RunResult]:
-    """Runs of the per-world groups (kind "unseen") whose ground depth failed (`failures.depth_cause`)."""
+    """Runs of the per-world groups (kind "unseen") whose ground depth failed (`failures.depth_cause`) on frames
+    that have it (a run without any ground estimate has no frame to show)."""
     return [r for r in results if r.error is None and r.spec.kind == "unseen" and r.spec.perception != "oracle"
-            and r.spec.depth_kind == "ground" and depth_cause(r.metrics) is not None]
+            and r.spec.depth_kind == "ground" and r.metrics.get("ground_depth_frames")
+            and depth_cause(r.metrics) is not None]
 
 
 def strip_frame_indices(ground_errors_m: npt.NDArray[np.float64], count: int = STRIP_FRAMES) -> list[int]:
