@@ -63,3 +63,20 @@ def test_strip_without_any_ground_estimate_raises_naming_the_run(tmp_path, monke
     spec = RunSpec("g", "unseen", "desert", "scripted", "trade", "gt", 10_000, 3, 64)
     with pytest.raises(ValueError, match="g/desert/scripted/trade/gt/seed10000"):
         depth_strips.write_strip(spec, tmp_path / "s.jpg")
+
+
+def test_a_strip_that_cannot_be_made_is_reported_and_the_others_are_written(tmp_path, monkeypatch, capsys):
+    bad, good = (_result("unseen", FAIL_GROUND_RMSE_M + 1.0) for _ in range(2))
+    bad = runner.RunResult(RunSpec("g", "unseen", "city", "learned", "trade", "vio", 10_001, 300, 256), bad.metrics,
+                           bad.timing, None)
+
+    def fake_strip(spec, path):
+        if spec.policy == "learned":
+            raise ValueError("boom")
+        path.write_bytes(b"\xff\xd8")
+        return path
+
+    monkeypatch.setattr(depth_strips, "write_strip", fake_strip)
+    written = depth_strips.write_strips([bad, good], tmp_path)
+    assert [p.name for p in written] == [depth_strips.strip_name(good.spec)]
+    assert "no strip for g/city/learned/trade/vio/seed10001: ValueError: boom" in capsys.readouterr().err

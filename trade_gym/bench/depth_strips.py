@@ -9,6 +9,7 @@ come from the benchmark's own flight.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -19,7 +20,7 @@ import numpy.typing as npt
 
 from trade_gym import metrics
 from trade_gym.bench.failures import depth_cause
-from trade_gym.bench.runner import RunResult, fly
+from trade_gym.bench.runner import RunResult, error_line, fly
 from trade_gym.bench.suites import RunSpec
 
 STRIP_FRAMES = 4  # frames per strip, spread over the frames whose ground estimate is off
@@ -95,10 +96,17 @@ def strip_name(spec: RunSpec) -> str:
 
 
 def write_strips(results: Sequence[RunResult], out: Path) -> list[Path]:
-    """One strip per failed-depth run into `out/strips/`; returns the files written."""
+    """One strip per failed-depth run into `out/strips/`; returns the files written. A strip that cannot be made
+    (its second flight raised) is reported on stderr and skipped, so the suite's results are still written."""
     failed = failed_depth_runs(results)
     if not failed:
         return []
     folder = out / "strips"
     folder.mkdir(exist_ok=True)
-    return [write_strip(r.spec, folder / strip_name(r.spec)) for r in failed]
+    written = []
+    for r in failed:
+        try:
+            written.append(write_strip(r.spec, folder / strip_name(r.spec)))
+        except Exception as exc:  # noqa: BLE001 - a picture must not cost the suite its results
+            print(f"trade-bench: no strip for {r.spec.run_id}: {error_line(exc)}", file=sys.stderr)
+    return written
