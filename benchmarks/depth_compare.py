@@ -15,6 +15,8 @@ import json
 import math
 from pathlib import Path
 
+from trade_gym.bench.summary import metric_stats, pooled_rmse
+
 MOVED_TRACKED = 0.01  # a change of the tracked fraction above this counts as moved
 THRESHOLDS_M = (1.0, 2.0)  # worlds above these ground RMSEs are counted
 
@@ -39,22 +41,20 @@ def _value(run: dict, name: str) -> float:
 def cell_figures(runs: list[dict]) -> dict:
     rmse = [_value(r, "ground_depth_rmse_m") for r in runs]
     frames = [_value(r, "ground_depth_frames") for r in runs]
-    pooled_num = sum(e * e * n for e, n in zip(rmse, frames) if math.isfinite(e))
-    pooled_den = sum(n for e, n in zip(rmse, frames) if math.isfinite(e))
+    stats = metric_stats(rmse)
     finite = [e for e in rmse if math.isfinite(e)]
-    off = [v for v in (_value(r, "ground_depth_off_fraction") for r in runs) if math.isfinite(v)]
-    tracked = [_value(r, "tracked_fraction") for r in runs]
+    tracked = metric_stats([_value(r, "tracked_fraction") for r in runs])
     return {
         "worlds": len(runs),
-        "pooled_ground_rmse_m": math.sqrt(pooled_num / pooled_den) if pooled_den else math.nan,
-        "ground_frames": int(pooled_den),
-        "worst_ground_rmse_m": max(finite) if finite else math.nan,
-        "median_ground_rmse_m": sorted(finite)[len(finite) // 2] if finite else math.nan,
+        "pooled_ground_rmse_m": pooled_rmse(rmse, frames),
+        "ground_frames": int(sum(n for e, n in zip(rmse, frames) if math.isfinite(e))),
+        "worst_ground_rmse_m": stats["max"],
+        "median_ground_rmse_m": stats["median"],
         **{f"worlds_above_{t:g}m": sum(e > t for e in finite) for t in THRESHOLDS_M},
         "worlds_without_ground_depth": len(rmse) - len(finite),
-        "mean_plane_off_fraction": sum(off) / len(off) if off else math.nan,
-        "min_tracked_fraction": min(tracked),
-        "mean_tracked_fraction": sum(tracked) / len(tracked),
+        "mean_plane_off_fraction": metric_stats([_value(r, "ground_depth_off_fraction") for r in runs])["mean"],
+        "min_tracked_fraction": tracked["min"],
+        "mean_tracked_fraction": tracked["mean"],
         "decoy_switches": int(sum(_value(r, "decoy_switches") for r in runs)),
     }
 
