@@ -133,8 +133,7 @@ class TradeFollowEnv(gym.Env):
       `visible`, `centering`, `altitude`, `effort`, `crash` (centering paid for standing off the target while
       accelerating; altitude for climbing half the target's height); `reward=` sets the weights.
     - v0, issue 18: `quadrotor=` (QuadrotorConfig: airframe, setpoint limits = action scale, gains) and `vio=`
-      (VioConfig: the VIO pose drift); the defaults are as before. Perception sees sensors only, the env scores
-      it; the frame guards are `trade`'s. Same values.
+      (VioConfig: the VIO pose drift), defaults as before; perception sees sensors only, the env scores it.
     - v0, issue 17: `drone_vel_mps` comes from the pose source (with `vio`: rotated by the yaw drift, plus a
       bounded velocity error, `VioConfig`), no longer from the simulator's true state.
     - v0, issue 19: `decoys=` ("ambiguous", the default and as before; "parked"; "none"), see `DecoyTier`.
@@ -143,6 +142,7 @@ class TradeFollowEnv(gym.Env):
     - v0, issue 19: `appearance=` ("fixed", the default: every image as before; "randomized": light, ground, vehicle
       paint, haze and camera effects per reset, `trade_gym.sim.appearance`); the reset's info gains `appearance`.
     - v0, issue 22: `renderer=` ("tiny", the default and as before: TinyRenderer; "egl": pybullet's EGL plugin).
+    - v0, issue 41: the reward's `distance` is measured mostly in following-band distances (`RewardConfig`).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -188,6 +188,7 @@ class TradeFollowEnv(gym.Env):
         self.world = build_world(cid, cfg.scene, world_rng, cfg.target_speed_mps, DecoyTier(cfg.decoys, cfg.camera_fov_deg),
                                  TargetMotion(cfg.target_motion, cfg.camera_fov_deg), rendered=cfg.needs_rendering)
         self._look = EpisodeLook(look_rng, self.world, self.camera)
+        self._follow_band = follow_band(self.world.spec.follow_altitude_agl_m, cfg.camera_fov_deg)  # reward, info
         start_position, start_yaw = self.world.drone_start()
         self.quadrotor.spawn(start_position, start_yaw)
         self._state = self.quadrotor.read_state()
@@ -211,7 +212,7 @@ class TradeFollowEnv(gym.Env):
                                 else EstimateDelay(self._t_s, ScoredEstimate.missing()))
         held = self._perceive(sensors, truth, lambda: self.perception.reset(sensors, init_box, rng))
         visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
-        inputs = reward_inputs(truth, self.world, self._state.position_m, visible, (), False)
+        inputs = reward_inputs(truth, self.world, self._follow_band, self._state.position_m, visible, (), False)
         info = self._info(truth, held, inputs, terms=None) | {"target_motion": self.world.target_motion_info}
         return self._observe(held.estimate, sensors), info | self._look.info
 
@@ -228,7 +229,7 @@ class TradeFollowEnv(gym.Env):
         visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
         self._time_target_hidden_s = 0.0 if visible else self._time_target_hidden_s + self.config.frame_dt_s
         self._steps += 1
-        inputs = reward_inputs(truth, self.world, self._state.position_m, visible, action, crashed)
+        inputs = reward_inputs(truth, self.world, self._follow_band, self._state.position_m, visible, action, crashed)
         reward, terms = compute_reward(self.config.reward, inputs)
         terminated = crashed or self._time_target_hidden_s >= self.config.lost_timeout_s
         truncated = self._steps >= self.config.max_episode_steps and not terminated
@@ -445,6 +446,5 @@ class TradeFollowEnv(gym.Env):
         )
 
     def _info(self, truth: GroundTruth, held: ScoredEstimate, x: RewardInputs, terms: dict | None) -> dict[str, Any]:
-        band = follow_band(self.world.spec.follow_altitude_agl_m, self.config.camera_fov_deg).holds(x)
-        return env_info(truth, held, EnvFrame(self._t_s, self._state.position_m, self._estimate_age_s, x.crashed, band),
-                        self.config.visible_fraction_threshold, terms)
+        frame = EnvFrame(self._t_s, self._state.position_m, self._estimate_age_s, x.crashed, self._follow_band.holds(x))
+        return env_info(truth, held, frame, self.config.visible_fraction_threshold, terms)

@@ -175,13 +175,15 @@ def env_info(truth: GroundTruth, held: ScoredEstimate, frame: EnvFrame, visible_
     return info
 
 
-def reward_inputs(truth: GroundTruth, world: World, drone_position_m: FloatArray, visible: bool, action: FloatArray,
-                  crashed: bool) -> RewardInputs:
-    """What the reward is computed from: the task in its own units, from ground truth and the drone's true state."""
+def reward_inputs(truth: GroundTruth, world: World, band: FollowBand, drone_position_m: FloatArray, visible: bool,
+                  action: FloatArray, crashed: bool) -> RewardInputs:
+    """What the reward is computed from: the task in its own units, from ground truth and the drone's true state;
+    `band` is the scene's following band (`follow_band`)."""
     drone, target = drone_position_m, truth.target_position_m
     return RewardInputs(
         target_visible=visible,
         horizontal_distance_m=horizontal_distance_m(drone, target),
         height_above_target_ground_m=float(drone[2] - world.ground_height_m(float(target[0]), float(target[1]))),
-        follow_height_m=world.spec.follow_altitude_agl_m,
+        follow_height_m=band.follow_height_m,
+        follow_distance_m=band.max_distance_m,
         action=action, crashed=crashed)

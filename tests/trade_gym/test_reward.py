@@ -10,6 +10,7 @@ from trade_gym.bench.splits import DEVELOPMENT
 from trade_gym.config import CAMERA_RATE_HZ, SCENE_NAMES, EnvConfig
 from trade_gym.reward import RewardConfig, RewardInputs, compute_reward
 from trade_gym.rollout import run_episode
+from trade_gym.scoring import FollowBand
 from trade_gym.sim.scenes import get_scene
 
 TERMS = ("visible", "distance", "height", "effort", "crash")
@@ -17,12 +18,14 @@ HOVER_ACTION = np.zeros(4, np.float32)
 RETURN_FRAMES = 300  # 10 s: the target drives 15-30 m, a few follow heights' worth of footprint
 RETURN_WORLDS = DEVELOPMENT.seeds(2)
 MIN_RETURN_GAIN = 0.2  # the scripted follower earns at least 20 % more than the better floor
+MAX_HOVER_RETURN_SHARE = 0.5  # hovering at the start distance earns at most half the scripted follower's return
 
 
 def frame_reward(follow_height_m: float, distance_m: float = 0.0, height_m: float | None = None,
                  visible: bool = True, crashed: bool = False, action=HOVER_ACTION) -> tuple[float, dict]:
     height = follow_height_m if height_m is None else height_m
-    return compute_reward(RewardConfig(), RewardInputs(visible, distance_m, height, follow_height_m,
+    band_m = FollowBand.of(follow_height_m, EnvConfig().camera_fov_deg).max_distance_m
+    return compute_reward(RewardConfig(), RewardInputs(visible, distance_m, height, follow_height_m, band_m,
                                                        np.asarray(action, np.float32), crashed))
 
 
@@ -31,6 +34,17 @@ def test_standing_further_off_the_target_earns_strictly_less(scene):
     h = get_scene(scene).follow_altitude_agl_m
     rewards = [frame_reward(h, distance_m=d)[0] for d in (0.0, 2.0, 5.0, 10.0)]
     assert all(a > b for a, b in zip(rewards, rewards[1:])), rewards
+
+
+@pytest.mark.parametrize("scene", SCENE_NAMES)
+def test_distance_is_measured_in_following_band_distances_and_saturates_at_the_band_edge(scene):
+    h = get_scene(scene).follow_altitude_agl_m
+    band_m = FollowBand.of(h, EnvConfig().camera_fov_deg).max_distance_m
+    share = RewardConfig().band_distance_share
+    for d in (band_m / 2, band_m, 2 * band_m, h, 3 * h):
+        expected = share * min(d / band_m, 1.0) + (1.0 - share) * min(d / h, 1.0)
+        assert frame_reward(h, distance_m=d)[1]["distance"] == pytest.approx(-expected)
+    assert frame_reward(h, distance_m=h)[1]["distance"] == pytest.approx(-1.0)  # both parts saturated
 
 
 @pytest.mark.parametrize("scene", SCENE_NAMES)
@@ -58,7 +72,7 @@ def test_a_crash_never_pays_against_flying_on_until_the_lost_timeout():
 
 
 @pytest.mark.parametrize("bad", [{"crash_penalty": -1.0}, {"distance_weight": float("nan")},
-                                 {"visible_bonus": True}])
+                                 {"visible_bonus": True}, {"band_distance_share": 1.5}])
 def test_bad_reward_weight_raises_naming_it(bad):
     name = next(iter(bad))
     with pytest.raises(ValueError, match=f"RewardConfig.{name}"):
@@ -81,8 +95,10 @@ def episode_return(policy_name: str, scene: str, seed: int) -> float:
 
 @pytest.mark.parametrize("scene", SCENE_NAMES)
 def test_following_earns_clearly_more_than_hovering_or_random_actions(scene):
-    """Over dev worlds, the scripted follower's return beats the better of hover and random by 20 %."""
+    """Over dev worlds (oracle), the scripted follower's return beats the better of hover and random by 20 %, and
+    hovering at the start distance earns at most half of it: watching the target drive off is not following."""
     mean = {name: np.mean([episode_return(name, scene, s) for s in RETURN_WORLDS])
             for name in ("scripted", "hover", "random")}
     floor = max(mean["hover"], mean["random"])
     assert mean["scripted"] >= floor + MIN_RETURN_GAIN * abs(floor), mean
+    assert mean["hover"] <= MAX_HOVER_RETURN_SHARE * mean["scripted"], mean

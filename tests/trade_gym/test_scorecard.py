@@ -46,7 +46,7 @@ def test_success_needs_no_crash_and_the_band_on_ninety_percent_of_frames():
 
 
 def band_inputs(distance_m: float, height_m: float, visible: bool = True) -> RewardInputs:
-    return RewardInputs(visible, distance_m, height_m, H, np.zeros(4), False)
+    return RewardInputs(visible, distance_m, height_m, H, FollowBand.of(H, FOV).max_distance_m, np.zeros(4), False)
 
 
 def test_follow_band_edges_follow_the_geometry():
