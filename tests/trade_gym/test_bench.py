@@ -3,6 +3,7 @@ end-to-end run (oracle perception) checked for schema validity and serial/parall
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import json
 import math
@@ -354,7 +355,9 @@ def test_breadth_suite_is_every_tier_motion_appearance_follower_and_perception_o
     from trade_gym.bench.suites import BREADTH_TIERS
 
     runs = expand_suite("breadth", Selection(), ALL)
-    assert len(runs) == 3 * 3 * 2 * 2 * 3 * 2  # tiers x scenes x followers x perceptions x motions x appearances
+    # tiers x scenes x worlds x followers x perceptions x motions x appearances
+    assert len(runs) == 3 * 3 * 5 * 2 * 2 * 3 * 2
+    assert len({r.world_seed for r in runs}) >= 5
     assert {r.switch_value("decoys") for r in runs} == set(BREADTH_TIERS)
     assert {r.switch_value("target_motion") for r in runs} == {"cruise", "stop_and_go", "evasive"}
     assert {r.switch_value("appearance") for r in runs} == {"fixed", "randomized"}
@@ -366,6 +369,36 @@ def test_breadth_suite_is_every_tier_motion_appearance_follower_and_perception_o
     cli.check_worlds("breadth", runs)
     with pytest.raises(cli.UsageError):  # its evaluation worlds belong to evaluation suites only
         cli.check_worlds(None, runs[:1])
+
+
+MIN_SUCCESS_CELL_RUNS = 30  # issue 41: every cell of the breadth success table holds at least this many runs
+
+
+def test_every_cell_of_the_breadth_success_table_holds_at_least_30_runs():
+    """A cell: follower, perception, target motion and appearance, runs pooled over scenes, worlds and tiers."""
+    runs = expand_suite("breadth", Selection(), ALL)
+    cells = collections.Counter((r.policy, r.perception, r.switch_value("target_motion"), r.switch_value("appearance"))
+                                for r in runs)
+    assert len(cells) == 2 * 2 * 3 * 2 and min(cells.values()) >= MIN_SUCCESS_CELL_RUNS, cells
+
+
+def test_breadth_tuning_suite_is_the_breadth_grid_on_training_worlds():
+    from trade_gym.bench.splits import TRAINING
+
+    tuning, evaluation = expand_suite("breadth-tuning", Selection(), ALL), expand_suite("breadth", Selection(), ALL)
+    assert len(tuning) == len(evaluation) and all(r.world_seed in TRAINING for r in tuning)
+    cli.check_worlds("breadth-tuning", tuning)
+    assert {r.run_id.rsplit("/", 1)[0] for r in tuning} == {r.run_id.rsplit("/", 1)[0] for r in evaluation}
+
+
+def test_wilson_interval_matches_the_textbook_values_and_stays_in_the_unit_interval():
+    from trade_gym.bench.summary import wilson_interval
+
+    assert wilson_interval(0.5, 18) == pytest.approx((0.2903, 0.7097), abs=1e-4)
+    assert wilson_interval(1.0, 45) == pytest.approx((0.9213, 1.0), abs=1e-4)
+    low, high = wilson_interval(0.0, 30)
+    assert low == 0.0 and high == pytest.approx(0.1135, abs=1e-4)
+    assert all(math.isnan(v) for v in wilson_interval(0.5, 0))
 
 
 def _breadth_result(tier: str, policy: str, perception: str, motion: str, success: bool) -> runner.RunResult:
@@ -387,9 +420,13 @@ def test_breadth_report_gives_success_per_tier_and_motion_and_plots_it(tmp_path)
     md = render_markdown(summarise(results), {"commit": "c", "date_utc": "d", "cpu": "x", "cores": 1,
                                               "renderer": "r", "runs": 8, "wall_s": 1.0, "jobs": 1}, {}, [], [])
     assert "| tier | scripted (trade) | scripted (dcf) |" in md
-    assert "| breadth_none | 1 (2) | 0.5 (2) |" in md and "| breadth_ambiguous | 0.5 (2) | 0 (2) |" in md
+    assert "| breadth_none | 1 [0.34, 1] (2) | 0.5 [0.09, 0.91] (2) |" in md
+    assert "| breadth_ambiguous | 0.5 [0.09, 0.91] (2) | 0 [0, 0.66] (2) |" in md
+    # the success table: motion x appearance, pooled over tiers
+    assert "| follower (perception) | cruise, fixed | evasive, fixed |" in md
+    assert "| scripted (trade) | 1 [0.34, 1] (2) | 0.5 [0.09, 0.91] (2) |" in md
     assert "| follower | cruise, fixed | evasive, fixed | success | following | collision |" in md
-    assert "| scripted (dcf) | 1 (1) | 0 (1) | 0.5 (2) | 0.57 (2) | 0 (2) |" in md
+    assert "| scripted (dcf) | 1 [0.21, 1] (1) | 0 [0, 0.79] (1) | 0.5 [0.09, 0.91] (2) | 0.57 (2) | 0 (2) |" in md
     written = plots.plot_suite(results, tmp_path)
     assert [p.name for p in written] == ["breadth_success.png"] and written[0].stat().st_size > 0
     assert plots.plot_suite(results[:0], tmp_path) == []

@@ -43,7 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "evaluation worlds per scene, ~1.5 h), tuning (the unseen grid on 20 development worlds, to tune "
                    "on), latency (full TRADE, scripted and learned followers, every scene, fixed perception latency "
                    "0-400 ms, 30 runs, ~15 min), breadth (every decoy tier x target motion x appearance, scripted and "
-                   "learned, TRADE and DCF, one evaluation world per scene, 216 runs, ~31 min with --jobs 2), unseen-depth "
+                   "learned, TRADE and DCF, 5 evaluation worlds per scene, 1080 runs, ~2.6 h with --jobs 2), breadth-tuning "
+                   "(the breadth grid on 5 training worlds per scene, to find failures and tune on), unseen-depth "
                    "(the depth failure finder: ground depth on 40 training and the 20 evaluation worlds per scene, "
                    "720 runs; a strip of frames per failed world), full "
                    "(paper tables at full length plus all followers, hours)")

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M, FAIL_TRACKED_FRACTION
-from trade_gym.bench.summary import config_label
+from trade_gym.bench.summary import config_label, wilson_interval
 from trade_gym.metrics import GROUND_OFF_M
 
 Record = dict[str, Any]
@@ -202,44 +202,60 @@ def pooled_mean(records: Sequence[Record], metric: str) -> tuple[float, int]:
 BREADTH_AXES = ("target_motion", "appearance")  # the breadth groups' switch grid
 
 
+def rate_cell(rate: float, n: int) -> str:
+    """A success rate with its 95 % Wilson interval and its runs: 'rate [low, high] (n)'."""
+    low, high = wilson_interval(rate, n)
+    return f"{fmt(rate, 2)} [{fmt(low, 2)}, {fmt(high, 2)}] ({n})" if n else f"{MISSING} (0)"
+
+
+def _breadth_cell(records: Sequence[Record], cell: tuple[str, ...]) -> list[Record]:
+    return [r for r in records if tuple(r["switches"][a] for a in BREADTH_AXES) == cell]
+
+
 def breadth_pivot(records: Sequence[Record]) -> list[str]:
     """One decoy tier: per follower and perception, the success rate for each target motion x appearance (pooled
-    over scenes), then success, following and collision rates over all its runs; cells 'rate (runs)'."""
+    over scenes), then success, following and collision rates over all its runs; success cells with their 95 %
+    interval."""
     cells = list(dict.fromkeys(tuple(r["switches"][a] for a in BREADTH_AXES) for r in records))
     rows = []
     for policy, perception in dict.fromkeys((r["policy"], r["perception"]) for r in records):
         mine = [r for r in records if r["policy"] == policy and r["perception"] == perception]
-        row = [f"{policy} ({perception})"]
-        for cell in cells:
-            rate, n = pooled_mean([r for r in mine if tuple(r["switches"][a] for a in BREADTH_AXES) == cell], "success")
-            row.append(f"{fmt(rate, 2)} ({n})")
-        for metric in ("success", "following_rate", "collision_rate"):
+        row = [f"{policy} ({perception})"] + [rate_cell(*pooled_mean(_breadth_cell(mine, c), "success")) for c in cells]
+        row.append(rate_cell(*pooled_mean(mine, "success")))
+        for metric in ("following_rate", "collision_rate"):
             rate, n = pooled_mean(mine, metric)
             row.append(f"{fmt(rate, 2)} ({n})")
         rows.append(row)
     header = ["follower"] + [f"{motion}, {look}" for motion, look in cells] + ["success", "following", "collision"]
-    return ["Success rate per target motion and appearance (runs pooled over scenes), then all runs' success, "
-            "following and collision rates; (n) = runs with the score defined.", ""] + table(header, rows)
+    return ["Success rate per target motion and appearance (runs pooled over scenes) [95 % Wilson interval], then "
+            "all runs' success, following and collision rates; (n) = runs with the score defined.", ""] + \
+        table(header, rows)
 
 
 def breadth_headline(summary: Sequence[Record]) -> list[str]:
-    """Across the breadth groups: the success rate per decoy tier for each follower and perception (runs pooled
-    over scenes, motions and appearances); nothing without breadth records."""
+    """Across the breadth groups: the success table (per follower and perception, the success rate of each target
+    motion x appearance, runs pooled over scenes, worlds and decoy tiers, with its 95 % interval), then the
+    success rate per decoy tier; nothing without breadth records."""
     records = [r for r in summary if r["kind"] == "breadth"]
     if not records:
         return []
     columns = list(dict.fromkeys((r["policy"], r["perception"]) for r in records))
-    rows = []
+    cells = list(dict.fromkeys(tuple(r["switches"][a] for a in BREADTH_AXES) for r in records))
+    success = []
+    for policy, perception in columns:
+        mine = [r for r in records if (r["policy"], r["perception"]) == (policy, perception)]
+        success.append([f"{policy} ({perception})"]
+                       + [rate_cell(*pooled_mean(_breadth_cell(mine, c), "success")) for c in cells])
+    tiers = []
     for group in dict.fromkeys(r["group"] for r in records):
         mine = [r for r in records if r["group"] == group]
-        row = [group]
-        for policy, perception in columns:
-            rate, n = pooled_mean([r for r in mine if (r["policy"], r["perception"]) == (policy, perception)],
-                                  "success")
-            row.append(f"{fmt(rate, 2)} ({n})")
-        rows.append(row)
-    return ["## Breadth headline: success rate per decoy tier", ""] + \
-        table(["tier"] + [f"{p} ({q})" for p, q in columns], rows) + [""]
+        tiers.append([group] + [rate_cell(*pooled_mean([r for r in mine if (r["policy"], r["perception"]) == c],
+                                                       "success")) for c in columns])
+    return (["## Breadth headline: success rate per target motion and appearance", "",
+             "Runs pooled over scenes, worlds and decoy tiers; [95 % Wilson interval] (runs).", ""]
+            + table(["follower (perception)"] + [f"{motion}, {look}" for motion, look in cells], success)
+            + ["", "## Breadth headline: success rate per decoy tier", ""]
+            + table(["tier"] + [f"{p} ({q})" for p, q in columns], tiers) + [""])
 
 
 PIVOTS = {"table1": table1_pivot, "table2": table2_pivot, "tracking": tracking_pivot, "follow": follow_pivot,

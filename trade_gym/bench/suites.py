@@ -37,10 +37,14 @@ LATENCIES_MS = (0.0, 33.0, 100.0, 200.0, 400.0)
 LATENCY_PROTOCOL: Kwargs = (("perception_latency", "fixed"),)
 LATENCY_WORLDS = (0, 0)  # development world seeds (reset seed = world seed), first and last
 # Scenario breadth: one table per decoy tier, each the grid target motion x appearance x follower x perception,
-# vio pose, one run per configuration on the first evaluation world of each scene, so every configuration of a
-# scene meets the same world (paired comparisons; `--seeds 5000 5004` widens it to more worlds).
+# vio pose, one run per configuration on the first 5 evaluation worlds of each scene, so every configuration of a
+# scene meets the same worlds (paired comparisons). A cell of the success table (follower, perception, motion,
+# appearance; runs pooled over scenes, worlds and tiers) holds 3 scenes x 5 worlds x 3 tiers = 45 runs, enough for
+# a 95 % interval of about +-0.12 at a rate of 0.8. `breadth-tuning` is the same grid on training worlds: the
+# one to find failures on and tune against.
 BREADTH_TIERS = ("none", "parked", "ambiguous")  # easiest first
-BREADTH_WORLDS = (EVALUATION.first, EVALUATION.first)
+BREADTH_WORLDS = (EVALUATION.first, EVALUATION.first + 4)
+BREADTH_TUNING_WORLDS = (TRAINING.first + 200, TRAINING.first + 204)  # past the depth finder's and the sweeps'
 # The depth failure finder: ground depth under full TRADE (both followers, gt and vio pose, clean start) on every
 # evaluation world and on training worlds, whose group is the one to tune on (`--tables depth_training`).
 DEPTH_FINDER_TRAINING_WORLDS = (TRAINING.first, TRAINING.first + 39)
@@ -231,11 +235,12 @@ def _latency_groups(steps: int, camera_size: int) -> tuple[GroupSpec, ...]:
     )
 
 
-def _breadth_groups(steps: int, camera_size: int) -> tuple[GroupSpec, ...]:
+def _breadth_groups(steps: int, camera_size: int, worlds: tuple[int, int] = BREADTH_WORLDS,
+                    split: str = "evaluation") -> tuple[GroupSpec, ...]:
     return tuple(
         GroupSpec(f"breadth_{tier}", "breadth", f"Scenario breadth, decoys={tier}: success rate by target motion "
-                  "and appearance, scripted and learned followers, full TRADE and DCF, vio pose", ALL_SCENES,
-                  ("scripted", "learned"), ("trade", "dcf"), ("vio",), BREADTH_WORLDS, steps, camera_size,
+                  f"and appearance, scripted and learned followers, full TRADE and DCF, vio pose, {split} worlds",
+                  ALL_SCENES, ("scripted", "learned"), ("trade", "dcf"), ("vio",), worlds, steps, camera_size,
                   (("target_motion", TARGET_MOTIONS), ("appearance", APPEARANCE_MODES)),
                   UNSEEN_PROTOCOL + (("decoys", tier),))
         for tier in BREADTH_TIERS)
@@ -259,6 +264,7 @@ SUITES: dict[str, tuple[GroupSpec, ...]] = {
     "tuning": _unseen_groups(PAPER_STEPS, PAPER_CAMERA_PX, "tuning", TUNING_WORLDS, "development"),
     "latency": _latency_groups(PAPER_STEPS, PAPER_CAMERA_PX),
     "breadth": _breadth_groups(PAPER_STEPS, PAPER_CAMERA_PX),
+    "breadth-tuning": _breadth_groups(PAPER_STEPS, PAPER_CAMERA_PX, BREADTH_TUNING_WORLDS, "training"),
     "unseen-depth": _depth_finder_groups(DEPTH_FINDER_STEPS, PAPER_CAMERA_PX),
     "full": _paper_groups(FULL_STEPS, PAPER_CAMERA_PX) + (
         GroupSpec("policies", "follow", "Followers on oracle and TRADE perception",
@@ -266,8 +272,8 @@ SUITES: dict[str, tuple[GroupSpec, ...]] = {
                   TRACKING_RUNS, FULL_STEPS, PAPER_CAMERA_PX),
     ),
 }
-SUITE_JOBS = {"quick": 2, "paper": 2, "unseen": 2, "tuning": 2, "latency": 2, "breadth": 2, "unseen-depth": 2,
-              "full": 2}  # default --jobs per suite
+SUITE_JOBS = {"quick": 2, "paper": 2, "unseen": 2, "tuning": 2, "latency": 2, "breadth": 2, "breadth-tuning": 2,
+              "unseen-depth": 2, "full": 2}  # default --jobs per suite
 # Suites that fly evaluation worlds; no other suite or grid may (`trade_gym.bench.splits`). Besides them, they may
 # fly training worlds (the depth finder's group to tune on), never development worlds.
 EVALUATION_SUITES = ("unseen", "breadth", "unseen-depth")

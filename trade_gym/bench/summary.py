@@ -17,6 +17,7 @@ from trade_gym.metrics import DEPTH_KINDS, METRIC_NAMES
 
 
 UPPER_PERCENTILE = 90.0  # the "p90" of metric_stats
+CONFIDENCE_Z = 1.959964  # the standard normal quantile of a two-sided 95 % interval
 
 
 def metric_stats(values: Sequence[float]) -> dict[str, float | int]:
@@ -30,6 +31,17 @@ def metric_stats(values: Sequence[float]) -> dict[str, float | int]:
     std = float(np.std(v, ddof=1)) if len(v) > 1 else math.nan
     return {"mean": float(np.mean(v)), "std": std, "min": float(np.min(v)), "max": float(np.max(v)),
             "median": float(np.median(v)), "p90": float(np.percentile(v, UPPER_PERCENTILE)), "n": len(v)}
+
+
+def wilson_interval(rate: float, n: int, z: float = CONFIDENCE_Z) -> tuple[float, float]:
+    """The Wilson score interval (95 % by default) of a success rate `rate` observed over `n` runs: unlike the
+    normal approximation it stays inside [0, 1] and is not empty at a rate of 0 or 1; (NaN, NaN) for n = 0."""
+    if n <= 0 or not math.isfinite(rate):
+        return math.nan, math.nan
+    z2 = z * z
+    centre = (rate + z2 / (2 * n)) / (1 + z2 / n)
+    half = z / (1 + z2 / n) * math.sqrt(rate * (1 - rate) / n + z2 / (4 * n * n))
+    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def pooled_rmse(rmses: Sequence[float], frames: Sequence[int]) -> float:
