@@ -26,7 +26,7 @@ SCENES = ("desert", "city", "mountain")
 _PROBE = """
 import hashlib, json, sys
 import numpy as np
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym.env import TradeFollowEnv
 perception, steps, size, skip = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), set(json.loads(sys.argv[4]))
 scenes, seeds, offset = json.loads(sys.argv[5]), json.loads(sys.argv[6]), int(sys.argv[7])

@@ -28,7 +28,7 @@ HERE = Path(__file__).resolve().parents[1]
 # tree's own code, a base from before trade_gym.rollout's hooks too, so it keeps its own loop.
 _PROBE = """
 import json, sys, time, numpy as np
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym.env import TradeFollowEnv
 scene, steps, camera_px = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 kwargs = dict(render_oracle_frames=True, camera_size=camera_px) if camera_px > 0 else {}

@@ -23,7 +23,7 @@ from ab_speed import HERE, run_meta
 # base from before trade_gym.rollout's hooks too, so it keeps its own loop (and counts the same instructions).
 _PROBE = """
 import sys
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym.env import TradeFollowEnv
 env = TradeFollowEnv(scene=sys.argv[1], perception="oracle")
 policy = ScriptedFollower()
