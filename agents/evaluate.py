@@ -1,9 +1,9 @@
-"""Evaluate a trained follower against the scripted one: `python -m agents.evaluate --model DIR/policy.onnx`.
+"""Evaluate a trained follower against the scripted one: `python -m trade_gym.agents.evaluate --model DIR/policy.onnx`.
 
 Both fly the same development worlds (reset seed = world seed) with the same env kwargs; per scene it reports
 the mean horizontal distance to the target, the tracked and visible fractions and the env's return, and the
 ratio of the model's distance to the scripted follower's. `trade-bench` scores the shipped follower; this scores
-any ONNX file `agents.train` wrote (its SHA-256 from `train_record.json` when that file sits beside it).
+any ONNX file `trade_gym.agents.train` wrote (its SHA-256 from `train_record.json` when that file sits beside it).
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.learned import LearnedFollower
-from agents.scripted import ScriptedFollower, ScriptedFollowerConfig
+from trade_gym.agents.learned import LearnedFollower
+from trade_gym.agents.scripted import ScriptedFollower, ScriptedFollowerConfig
 from trade_gym.bench.splits import DEVELOPMENT, refuse_evaluation_worlds
 from trade_gym.config import CAMERA_RATE_HZ, SCENE_NAMES
 from trade_gym.env import TradeFollowEnv
@@ -46,7 +46,7 @@ def _model_sha256(model: Path, given: str | None) -> str | None:
 def evaluate(model: Path, sha256: str | None, scenes: Sequence[str], worlds: Sequence[int], steps: int,
              env_kwargs: dict[str, Any]) -> dict[str, Any]:
     """Per scene, per follower: the per-world scores and their means; the learned / scripted distance ratio."""
-    refuse_evaluation_worlds(worlds, "agents.evaluate --worlds")
+    refuse_evaluation_worlds(worlds, "trade_gym.agents.evaluate --worlds")
     out: dict[str, Any] = {"model": str(model), "worlds": list(worlds), "steps": steps, "env_kwargs": env_kwargs,
                            "scenes": {}}
     for scene in scenes:
@@ -78,7 +78,7 @@ def _parse_kwarg(text: str) -> tuple[str, Any]:
 
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description="Fly a trained ONNX follower and the scripted one on development worlds.")
-    p.add_argument("--model", type=Path, required=True, help="policy.onnx written by agents.train")
+    p.add_argument("--model", type=Path, required=True, help="policy.onnx written by trade_gym.agents.train")
     p.add_argument("--sha256", default=None, help="expected SHA-256 (default: train_record.json beside the model)")
     p.add_argument("--scenes", nargs="+", default=list(SCENE_NAMES), choices=SCENE_NAMES)
     p.add_argument("--worlds", nargs=2, type=int, default=DEFAULT_WORLDS, metavar=("FIRST", "LAST"),

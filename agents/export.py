@@ -16,8 +16,8 @@ import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.policies import ActorCriticPolicy
 
-from agents.obs_flatten import N_FEATURES
 from trade_gym.action import ACTION_DIM
+from trade_gym.agents.obs_flatten import N_FEATURES
 
 OPSET = 17  # supported by the venv's onnxruntime (1.17+ runs opset <= 20)
 INPUT_NAME = "features"
@@ -97,7 +97,7 @@ def main() -> None:
     from stable_baselines3 import PPO, SAC
 
     parser = argparse.ArgumentParser(description="Export a saved SB3 follower (.zip) to ONNX.")
-    parser.add_argument("model", type=Path, help="SB3 .zip saved by agents.train")
+    parser.add_argument("model", type=Path, help="SB3 .zip saved by trade_gym.agents.train")
     parser.add_argument("out", type=Path, help="ONNX file to write")
     parser.add_argument("--algo", choices=("ppo", "sac"), default="ppo")
     args = parser.parse_args()

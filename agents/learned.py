@@ -28,15 +28,15 @@ from typing import Any
 import numpy as np
 import onnxruntime as ort
 
-from agents.obs_flatten import N_FEATURES, POSITION_KNOWN_INDEX, flatten_observation
 from trade.model_file import ModelFileError, check_sha256_format, open_verified_session
-from assets import ASSETS_DIR
 from trade.validation import is_finite_number, is_positive_number, require
 from trade_gym.action import ACTION_DIM, DEFAULT_ACTION_SCALE
+from trade_gym.agents.obs_flatten import N_FEATURES, POSITION_KNOWN_INDEX, flatten_observation
+from trade_gym.assets import ASSETS_DIR
 from trade_gym.config import CAMERA_RATE_HZ
 
 DEFAULT_POLICY = ASSETS_DIR / "policies" / "follower_ppo.onnx"
-# SHA-256 of the shipped policy, printed by `python -m agents.train` and recorded in follower_ppo.md
+# SHA-256 of the shipped policy, printed by `python -m trade_gym.agents.train` and recorded in follower_ppo.md
 DEFAULT_POLICY_SHA256 = "71efd3165ec1d06bd22c519796d9e4a6cc47a15d74216d19eddff32f2be401f1"
 # Length of the soft start [s] (module docstring); set on development worlds 100-119 of the city, where the policy
 # without it lost the target in its first frames on 6 of 20 worlds under full TRADE (the model card).

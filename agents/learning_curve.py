@@ -96,11 +96,12 @@ def plot_curves(runs: dict[str, str | Path], out_png: str | Path, reference: dic
 
 
 def main(argv: list[str] | None = None) -> None:
-    """`python -m agents.learning_curve RUN_DIR... --out curve.png [--scripted-m D]`: plot runs' curves."""
+    """`python -m trade_gym.agents.learning_curve RUN_DIR... --out curve.png [--scripted-m D]`: plot runs' curves."""
     import argparse
 
-    p = argparse.ArgumentParser(description="Plot the learning curves of agents.train runs.")
-    p.add_argument("runs", nargs="+", type=Path, help="output folders of agents.train (holding learning_curve.csv)")
+    p = argparse.ArgumentParser(description="Plot the learning curves of trade_gym.agents.train runs.")
+    p.add_argument("runs", nargs="+", type=Path,
+                   help="output folders of trade_gym.agents.train (holding learning_curve.csv)")
     p.add_argument("--out", type=Path, required=True, help="PNG to write")
     p.add_argument("--scripted-m", type=float, default=None,
                    help="the scripted follower's mean horizontal distance [m], drawn as a reference line")

@@ -1,8 +1,9 @@
 """Training of learned followers with stable-baselines3 (PPO or SAC) on the oracle perception mode.
 
-Owns `TrainConfig`, the vectorised training envs (`agents.training_env`: scene and world seed drawn per
-episode), the PPO warm start and critic warm-up, and `python -m agents.train --out DIR` (settings from `agents/hyperparams/<algo>.yml`), which writes
-the SB3 model, the ONNX policy (`agents.export`) and a JSON record of the run (seeds, steps, wall time, hash).
+Owns `TrainConfig`, the vectorised training envs (`trade_gym.agents.training_env`: scene and world seed drawn per
+episode), the PPO warm start and critic warm-up, and `python -m trade_gym.agents.train --out DIR` (settings from
+`agents/hyperparams/<algo>.yml`), which writes the SB3 model, the ONNX policy (`trade_gym.agents.export`) and a JSON
+record of the run (seeds, steps, wall time, hash).
 """
 
 from __future__ import annotations
@@ -18,10 +19,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from agents.learning_curve import curve_callback
-from agents.obs_flatten import FlatObservation
-from agents.training_env import SceneRandomizedEnv, ZeroYawAction
-from agents.warm_start import WarmStartConfig
+from trade_gym.agents.learning_curve import curve_callback
+from trade_gym.agents.obs_flatten import FlatObservation
+from trade_gym.agents.training_env import SceneRandomizedEnv, ZeroYawAction
+from trade_gym.agents.warm_start import WarmStartConfig
 from trade_gym.bench.splits import require_training_worlds
 from trade.validation import check_choice, is_int_at_least, require
 from trade_gym.config import SCENE_NAMES
@@ -157,7 +158,7 @@ def build_model(config: TrainConfig, vec_env):
 
 def warm_start(model, config: TrainConfig) -> dict:
     """Clone the scripted follower into `model` (demonstrations on their own seeds); returns the fit record."""
-    from agents.warm_start import warm_start_ppo
+    from trade_gym.agents.warm_start import warm_start_ppo
 
     demo_env = _vec_env(config, flat=False, seed=config.seed + DEMO_SEED_OFFSET)
     try:
@@ -169,7 +170,7 @@ def warm_start(model, config: TrainConfig) -> dict:
 
 def _learn(model, config: TrainConfig, callback) -> None:
     """PPO/SAC learning for `total_steps`; with a warm start, the actor is frozen for the critic warm-up."""
-    from agents.warm_start import actor_parameters
+    from trade_gym.agents.warm_start import actor_parameters
 
     bar = config.progress_bar and _progress_bar_available()
     warmup = config.critic_warmup_steps if config.warm_start is not None else 0
@@ -187,7 +188,7 @@ def train(config: TrainConfig, out_dir: str | Path) -> dict:
     """(Warm-start,) train, save `model.zip`, export `policy.onnx`, write and return `train_record.json`."""
     import torch
 
-    from agents.export import export_onnx, max_export_error
+    from trade_gym.agents.export import export_onnx, max_export_error
 
     if config.tensorboard_dir is not None:
         try:

@@ -13,8 +13,8 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
-from agents.obs_flatten import flatten_observation
-from agents.scripted import ScriptedFollower
+from trade_gym.agents.obs_flatten import flatten_observation
+from trade_gym.agents.scripted import ScriptedFollower
 from trade.validation import is_int_at_least, require
 
 FloatArray = npt.NDArray[np.float32]

@@ -12,12 +12,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
 
-from ab_speed import HERE, run_meta
+from ab_speed import HERE, import_root, probe_env, run_meta
 
 SCENES = ("desert", "city", "mountain")
 # Hashes every step's (obs, reward, terminated, truncated, info), keys sorted, new keys skipped; a reset seeded
@@ -26,7 +25,7 @@ SCENES = ("desert", "city", "mountain")
 _PROBE = """
 import hashlib, json, sys
 import numpy as np
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym.env import TradeFollowEnv
 perception, steps, size, skip = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), set(json.loads(sys.argv[4]))
 scenes, seeds, offset = json.loads(sys.argv[5]), json.loads(sys.argv[6]), int(sys.argv[7])
@@ -64,11 +63,10 @@ RESET_SEED_OFFSET = 100
 
 
 def digests(tree: Path, args: argparse.Namespace) -> dict[str, str]:
-    env = dict(os.environ, PYTHONPATH=str(tree))
     argv = [args.perception, str(args.steps), str(args.camera_size), json.dumps(args.new_keys), json.dumps(SCENES),
             json.dumps(args.seeds), str(RESET_SEED_OFFSET)]
-    out = subprocess.run([sys.executable, "-c", _PROBE, *argv], cwd=tree, env=env, capture_output=True, text=True,
-                         check=True).stdout
+    out = subprocess.run([sys.executable, "-c", _PROBE, *argv], cwd=import_root(tree), env=probe_env(tree),
+                         capture_output=True, text=True, check=True).stdout
     return json.loads(out.strip().splitlines()[-1])
 
 

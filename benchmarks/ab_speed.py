@@ -11,12 +11,17 @@ Usage: git worktree add /tmp/base <commit>; python benchmarks/ab_speed.py --base
 from __future__ import annotations
 
 import argparse
+import atexit
+import functools
 import json
 import os
 import platform
+import shutil
 import statistics
 import subprocess
 import sys
+import tempfile
+import tomllib
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -28,7 +33,7 @@ HERE = Path(__file__).resolve().parents[1]
 # tree's own code, a base from before trade_gym.rollout's hooks too, so it keeps its own loop.
 _PROBE = """
 import json, sys, time, numpy as np
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym.env import TradeFollowEnv
 scene, steps, camera_px = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 kwargs = dict(render_oracle_frames=True, camera_size=camera_px) if camera_px > 0 else {}
@@ -51,11 +56,37 @@ print(json.dumps({"cpu_steps_per_s": steps / cpu, "wall_steps_per_s": steps / wa
 """
 
 
+@functools.cache
+def import_root(tree: Path) -> Path:
+    """A folder from which `tree`'s code imports as an install of it would: a probe's PYTHONPATH and working folder.
+
+    It links to the tree's top-level entries, but rebuilds trade_gym/ from links with the tree's agents/ and assets/
+    inside, as trade_gym.agents and trade_gym.assets: from a bare tree on PYTHONPATH those two would come from this
+    Python's editable install (its import hook maps them), not from the tree. A tree from before that mapping
+    (pyproject.toml without package-dir) keeps agents/ and assets/ at the top as well, where its own code imports them.
+    """
+    setuptools = tomllib.loads((tree / "pyproject.toml").read_text()).get("tool", {}).get("setuptools", {})
+    mapped = set(setuptools.get("package-dir", {}).values())  # {"agents", "assets"} since the mapping
+    root = Path(tempfile.mkdtemp(prefix="import_root_"))
+    atexit.register(shutil.rmtree, root, ignore_errors=True)  # removes the links, never what they point to
+    for entry in tree.iterdir():
+        if entry.name != "trade_gym" and entry.name not in mapped:
+            (root / entry.name).symlink_to(entry)
+    (root / "trade_gym").mkdir()
+    for entry in [*(tree / "trade_gym").iterdir(), tree / "agents", tree / "assets"]:
+        (root / "trade_gym" / entry.name).symlink_to(entry)
+    return root
+
+
+def probe_env(tree: Path) -> dict[str, str]:
+    """The environment of a probe process that runs `tree`'s code (run it with cwd=import_root(tree))."""
+    return dict(os.environ, PYTHONPATH=str(import_root(tree)))
+
+
 def _measure(tree: Path, scene: str, steps: int, camera_px: int = 0) -> dict:
     """One probe run on `tree`; `camera_px` > 0 renders the camera at that size every step."""
-    env = dict(os.environ, PYTHONPATH=str(tree))
-    out = subprocess.run([sys.executable, "-c", _PROBE, scene, str(steps), str(camera_px)], cwd=tree, env=env,
-                         capture_output=True, text=True, check=True).stdout
+    out = subprocess.run([sys.executable, "-c", _PROBE, scene, str(steps), str(camera_px)], cwd=import_root(tree),
+                         env=probe_env(tree), capture_output=True, text=True, check=True).stdout
     return json.loads(out.strip().splitlines()[-1])
 
 

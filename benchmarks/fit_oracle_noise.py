@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym import metrics
 from trade_gym.bench.splits import TRAINING, require_training_worlds
 from trade_gym.config import CAMERA_RATE_HZ

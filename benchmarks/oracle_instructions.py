@@ -10,20 +10,19 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
-from ab_speed import HERE, run_meta
+from ab_speed import HERE, import_root, probe_env, run_meta
 
 # The probe: reset, then `steps` steps of the scripted follower in oracle mode. It runs on each tree's own code, a
 # base from before trade_gym.rollout's hooks too, so it keeps its own loop (and counts the same instructions).
 _PROBE = """
 import sys
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym.env import TradeFollowEnv
 env = TradeFollowEnv(scene=sys.argv[1], perception="oracle")
 policy = ScriptedFollower()
@@ -37,9 +36,8 @@ _TOTAL = re.compile(r"I\s+refs:\s+([\d,]+)")
 
 def _instructions(tree: Path, scene: str, steps: int) -> int:
     """Instructions the probe executes in `tree` (cachegrind's I refs, no cache simulation)."""
-    env = dict(os.environ, PYTHONPATH=str(tree))
     out = subprocess.run(["valgrind", "--tool=cachegrind", "--cache-sim=no", "--cachegrind-out-file=/dev/null",
-                          sys.executable, "-c", _PROBE, scene, str(steps)], cwd=tree, env=env,
+                          sys.executable, "-c", _PROBE, scene, str(steps)], cwd=import_root(tree), env=probe_env(tree),
                          capture_output=True, text=True, check=True).stderr
     match = _TOTAL.search(out)
     if match is None:

@@ -19,7 +19,7 @@ import numpy as np
 
 from step_clock import StepClock  # benchmarks/ is on sys.path when this script runs
 
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade.pipeline import StageTimings
 from trade_gym.env import TradeFollowEnv
 from trade_gym.rollout import fly_episode

@@ -13,14 +13,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-from ab_speed import run_meta  # benchmarks/ is on sys.path when this script runs
+from ab_speed import import_root, probe_env, run_meta  # benchmarks/ is on sys.path when this script runs
 
 HERE = Path(__file__).resolve().parents[1]
 PROFILE = Path(__file__).resolve().parent / "profile_trade.py"
@@ -31,20 +30,19 @@ MS_DIGITS = 2
 
 def _profile(tree: Path, args: argparse.Namespace, mode_flags: list[str]) -> dict[str, float]:
     """Mean ms per frame of each stage (profile_trade's ms_per_frame.<stage>.mean) of one run on `tree`."""
-    env = dict(os.environ, PYTHONPATH=str(tree))
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "profile.json"
         subprocess.run([sys.executable, str(PROFILE), "--scene", args.scene, "--steps", str(args.steps),
-                        "--camera-size", str(args.camera_size), "--json", str(out), *mode_flags], cwd=tree,
-                       env=env, check=True, capture_output=True, text=True)
+                        "--camera-size", str(args.camera_size), "--json", str(out), *mode_flags], cwd=import_root(tree),
+                       env=probe_env(tree), check=True, capture_output=True, text=True)
         table = json.loads(out.read_text())["ms_per_frame"]
     return {stage: summary["mean"] for stage, summary in table.items()}
 
 
 def _loaded_from(tree: Path) -> str:
-    """Where `trade` is imported from with `tree` on PYTHONPATH (checks that the run measures that tree)."""
-    env = dict(os.environ, PYTHONPATH=str(tree))
-    return subprocess.run([sys.executable, "-c", "import trade; print(trade.__file__)"], env=env, cwd=tree,
+    """Where `trade` is imported from in a probe of `tree` (checks that the run measures that tree)."""
+    code = "import os, trade; print(os.path.realpath(trade.__file__))"
+    return subprocess.run([sys.executable, "-c", code], env=probe_env(tree), cwd=import_root(tree),
                           check=True, capture_output=True, text=True).stdout.strip()
 
 

@@ -19,7 +19,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym.config import CAMERA_RATE_HZ
 from trade_gym.env import TradeFollowEnv
 from trade_gym.provenance import cpu_model, git_commit

@@ -14,12 +14,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
 
-from ab_speed import median_ratio, run_meta  # benchmarks/ is on sys.path when this script runs
+from ab_speed import import_root, median_ratio, probe_env, run_meta  # benchmarks/ is on sys.path when this script runs
 
 HERE = Path(__file__).resolve().parents[1]
 
@@ -52,9 +51,8 @@ print(json.dumps({"tracked_ms": statistics.median(tracked_ms), "lost_ms": statis
 
 
 def _measure(tree: Path) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(tree))
-    out = subprocess.run([sys.executable, "-c", _PROBE], cwd=tree, env=env, capture_output=True, text=True,
-                         check=True).stdout
+    out = subprocess.run([sys.executable, "-c", _PROBE], cwd=import_root(tree), env=probe_env(tree),
+                         capture_output=True, text=True, check=True).stdout
     return json.loads(out.strip().splitlines()[-1])
 
 

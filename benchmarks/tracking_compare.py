@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym import metrics
 from trade_gym.rollout import run_episode
 

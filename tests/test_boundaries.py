@@ -1,7 +1,7 @@
 """The package boundaries of DESIGN.md, checked statically on the source (AST, nothing imported):
 
-- `trade/` (the perception stack, run on recorded data too) imports none of pybullet, gymnasium, `trade_gym`,
-  `agents` or torch;
+- `trade/` (the perception stack, run on recorded data too) imports none of pybullet, gymnasium, `trade_gym`
+  (with its followers, `trade_gym.agents`) or torch;
 - the TRADE adapter (every file under trade_gym/perception whose name contains "trade") and the perception
   contract (`base.py`) do not import the ground-truth module: perception sees sensors only, the env scores it.
 """
@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-STACK_FORBIDDEN = ("pybullet", "gymnasium", "gym", "trade_gym", "agents", "torch")
+STACK_FORBIDDEN = ("pybullet", "gymnasium", "gym", "trade_gym", "torch")
 GROUND_TRUTH_MODULE = "trade_gym.ground_truth"
 IMPORT_CALLS = ("import_module", "__import__")  # importlib.import_module("x"), __import__("x")
 
@@ -82,7 +82,7 @@ def test_trade_adapter_and_perception_contract_do_not_import_ground_truth(path):
     ("from trade_gym import ground_truth", "trade_gym.ground_truth"),
     ("from ..ground_truth import GroundTruth", "trade_gym.ground_truth"),
     ("import importlib\nimportlib.import_module('pybullet')", "pybullet"),
-    ("def f():\n    import agents", "agents"),
+    ("def f():\n    import trade_gym.agents", "trade_gym.agents"),
 ])
 def test_import_checker_finds_direct_relative_lazy_and_dynamic_imports(source, found):
     assert found in imported_modules(source, "trade_gym.perception")

@@ -14,12 +14,12 @@ import numpy as np
 import numpy.typing as npt
 import onnxruntime as ort
 
-from trade.model_file import ModelFileError, check_sha256_format, open_verified_session
+from trade.model_file import ModelFileError, check_sha256_format, open_verified_session, shipped_assets_dir
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
-MODEL_DIR = Path(__file__).resolve().parents[1] / "assets" / "models"
+MODEL_DIR = shipped_assets_dir() / "models"  # the repo's assets/models (the stack does not import trade_gym)
 DEFAULT_MODEL = MODEL_DIR / "depth_small.onnx"
 # SHA-256 of the shipped model, printed by scripts/train_depth.py and recorded in depth_small.md
 DEFAULT_MODEL_SHA256 = "82900bd52585efdd31317b379029b47c3d76f7f5fc9457e7eeeb6fbcec9418fb"

@@ -10,10 +10,10 @@ import pytest
 import torch
 from stable_baselines3 import PPO, SAC
 
-from agents.export import export_onnx, max_export_error, sb3_actions
+from trade_gym.agents.export import export_onnx, max_export_error, sb3_actions
 from trade_gym.action import ACTION_DIM
-from agents.learned import LearnedFollower
-from agents.obs_flatten import N_FEATURES, feature_space, flatten_observation
+from trade_gym.agents.learned import LearnedFollower
+from trade_gym.agents.obs_flatten import N_FEATURES, feature_space, flatten_observation
 from trade_gym.env import TradeFollowEnv
 
 MATCH_TOLERANCE = 1e-5

@@ -11,11 +11,11 @@ import sys
 import numpy as np
 import pytest
 
-from agents.learned import (DEFAULT_POLICY, MAX_ACCEL_UNFIXED_MPS2, POLICY_SPEED_SCALE_MPS, AgentError,
-                            LearnedFollower, PolicyModelError)
-from agents.scripted import ScriptedFollower
 from trade.model_file import ModelFileError
 from trade_gym import metrics
+from trade_gym.agents.learned import (DEFAULT_POLICY, MAX_ACCEL_UNFIXED_MPS2, POLICY_SPEED_SCALE_MPS, AgentError,
+                                      LearnedFollower, PolicyModelError)
+from trade_gym.agents.scripted import ScriptedFollower
 from trade_gym.config import CAMERA_RATE_HZ
 from trade_gym.observation import observation_space
 from trade_gym.rollout import run_episode
@@ -80,7 +80,7 @@ def test_load_malformed_expected_hash_raises_value_error():
 
 
 def test_import_agents_and_learned_does_not_import_torch():
-    code = ("import sys, agents; from agents import LearnedFollower; LearnedFollower(); "
+    code = ("import sys, trade_gym.agents; from trade_gym.agents import LearnedFollower; LearnedFollower(); "
             "assert 'torch' not in sys.modules and 'stable_baselines3' not in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)
 

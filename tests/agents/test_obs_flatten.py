@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.obs_flatten import FEATURE_CLIP, FEATURE_LAYOUT, N_FEATURES, FlatObservation, flatten_observation
+from trade_gym.agents.obs_flatten import FEATURE_CLIP, FEATURE_LAYOUT, N_FEATURES, FlatObservation, flatten_observation
 from trade_gym.env import TradeFollowEnv
 from trade_gym.observation import observation_space
 

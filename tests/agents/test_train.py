@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
-from agents.learned import LearnedFollower
-from agents.train import TrainConfig, _parser, config_from_args, hyperparams_path, load_train_config, train
-from agents.training_env import SceneRandomizedEnv, ZeroYawAction
+from trade_gym.agents.learned import LearnedFollower
+from trade_gym.agents.train import TrainConfig, _parser, config_from_args, hyperparams_path, load_train_config, train
+from trade_gym.agents.training_env import SceneRandomizedEnv, ZeroYawAction
 from trade_gym.bench.policies import HoverPolicy
 from trade_gym.bench.splits import DEVELOPMENT, EVALUATION, TRAINING
 from trade_gym.reward import RewardConfig
@@ -163,7 +163,7 @@ def test_command_line_from_scratch_and_overrides_apply_on_the_hyperparameter_fil
 
 
 def test_learning_curve_logs_every_finished_training_episode_and_plots(tiny_run, tmp_path):
-    from agents.learning_curve import CURVE_FILE, moving_mean, plot_curves, read_curve
+    from trade_gym.agents.learning_curve import CURVE_FILE, moving_mean, plot_curves, read_curve
 
     out, record = tiny_run
     curve = read_curve(out / CURVE_FILE)
@@ -178,7 +178,7 @@ def test_learning_curve_logs_every_finished_training_episode_and_plots(tiny_run,
 
 
 def test_evaluate_flies_model_and_scripted_on_the_same_worlds_and_refuses_evaluation_worlds(tiny_run):
-    from agents.evaluate import evaluate
+    from trade_gym.agents.evaluate import evaluate
     from trade_gym.bench.splits import EvaluationWorldError
 
     out, record = tiny_run

@@ -7,10 +7,10 @@ import pytest
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from agents.obs_flatten import N_FEATURES
-from agents.scripted import ScriptedFollower
-from agents.train import TrainConfig, make_training_env
-from agents.warm_start import (
+from trade_gym.agents.obs_flatten import N_FEATURES
+from trade_gym.agents.scripted import ScriptedFollower
+from trade_gym.agents.train import TrainConfig, make_training_env
+from trade_gym.agents.warm_start import (
     WarmStartConfig,
     actor_parameters,
     clone_into_policy,

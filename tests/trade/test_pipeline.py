@@ -48,8 +48,9 @@ def _run(config: PipelineConfig, n_frames: int = 90, seed: int = 0):
 
 
 def test_import_trade_keeps_simulator_env_and_torch_out():
-    code = ("import sys, trade, trade.pipeline; "
-            "bad = [m for m in ('pybullet', 'gymnasium', 'torch', 'trade_gym', 'agents') if m in sys.modules]; "
+    """Also when the stack locates the shipped depth model (it finds trade_gym.assets without importing it)."""
+    code = ("import sys, trade, trade.pipeline, trade.single_image_depth; "
+            "bad = [m for m in ('pybullet', 'gymnasium', 'torch', 'trade_gym') if m in sys.modules]; "
             "print(','.join(bad)); sys.exit(1 if bad else 0)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.returncode == 0, f"trade imported: {result.stdout.strip()} {result.stderr[-500:]}"

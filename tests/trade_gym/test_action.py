@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents import ScriptedFollowerConfig
-from agents.training_env import TRAIN_ACTION_DIM, ZeroYawAction
+from trade_gym.agents import ScriptedFollowerConfig
+from trade_gym.agents.training_env import TRAIN_ACTION_DIM, ZeroYawAction
 from trade_gym.action import ACTION_DIM, ACTION_NAMES, DEFAULT_ACTION_SCALE, ActionScale, action_space
 from trade_gym.config import CAMERA_RATE_HZ
 from trade_gym.bench.policies import RandomPolicy, make_policy

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from gymnasium.vector import AsyncVectorEnv, SyncVectorEnv
 
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym.env import TradeFollowEnv
 
 ENV_ID = "trade_gym:TradeFollow-v0"  # the module prefix imports trade_gym in spawned workers

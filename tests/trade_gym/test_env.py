@@ -204,12 +204,12 @@ def test_depth_only_mode_needs_the_ground_mask_turned_off_explicitly():
 
 def test_making_and_stepping_prints_nothing_and_agents_lists_its_lazy_names():
     """In a fresh interpreter (pybullet not yet imported): gym.make, reset, step and close write nothing to
-    stdout or stderr (pybullet's C import prints a build-time banner on fd 2), and dir(agents) lists the
-    names that load lazily."""
+    stdout or stderr (pybullet's C import prints a build-time banner on fd 2), and dir(trade_gym.agents) lists
+    the names that load lazily."""
     import subprocess
     import sys
 
-    code = ("import gymnasium as gym, trade_gym, agents\n"
+    code = ("import gymnasium as gym, trade_gym\nfrom trade_gym import agents\n"
             "env = gym.make('TradeFollow-v0', perception='oracle')\n"
             "env.reset(seed=0); env.step(env.action_space.sample()); env.close()\n"
             "assert {'LearnedFollower', 'PolicyModelError', 'ScriptedFollower'} <= set(dir(agents)), dir(agents)\n")

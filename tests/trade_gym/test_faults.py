@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import trade_gym  # noqa: F401  (registers TradeFollow-v0)
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade.geometry import CameraIntrinsics, Pose
 from trade.ground_filter import GroundFilter, GroundFilterConfig
 from trade.roi_features import RoiFeatures

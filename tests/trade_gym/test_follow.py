@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym.rollout import run_episode
 
 MIN_VISIBLE_FRACTION = 0.95

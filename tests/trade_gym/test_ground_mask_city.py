@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 import pytest
 
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade.geometry import rotation_z
 from trade.ground_filter import GroundFilter, GroundFilterConfig, GroundLabels
 from trade.roi_features import RoiConfig, RoiFeatureTracker

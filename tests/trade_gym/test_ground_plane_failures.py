@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade.planes import MultiRansacConfig
 from trade_gym import metrics
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M, FAIL_TRACKED_FRACTION

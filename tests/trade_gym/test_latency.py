@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.passive_env_checker import data_shares_objects
 
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from tests.trade_gym.test_determinism import single_digest
 from trade_gym.config import CAMERA_RATE_HZ
 from trade_gym.env import TradeFollowEnv

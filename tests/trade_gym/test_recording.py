@@ -17,7 +17,7 @@ import jsonschema
 import numpy as np
 import pytest
 
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym.bench.cli import main as bench_main
 from trade_gym.bench.runner import run_spec, trajectory_sha256
 from trade_gym.bench.suites import RunSpec

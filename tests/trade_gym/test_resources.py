@@ -18,7 +18,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym.env import TradeFollowEnv
 
 MAX_GROWTH_100_RESETS_MB = 10.0

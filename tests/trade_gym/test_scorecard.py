@@ -75,7 +75,7 @@ def test_an_occlusion_gives_absent_frames_that_adq_scores():
     """A 1 s overpass over the path hides the target (absent frames); the stack should not report a box there."""
     import gymnasium as gym
 
-    from agents import ScriptedFollower
+    from trade_gym.agents import ScriptedFollower
     from trade_gym.faults import Fault, FaultSchedule, SensorFaults
     from trade_gym.rollout import fly_episode
 

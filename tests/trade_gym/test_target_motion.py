@@ -8,7 +8,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from agents import ScriptedFollower
+from trade_gym.agents import ScriptedFollower
 from trade_gym.config import EnvConfig
 from trade_gym.env import TradeFollowEnv
 from trade_gym.sim.evasive import EVASIVE_OFFROAD_LATERAL_M, EVASIVE_SPEED_FACTOR, evasive_radius_m

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from agents import ScriptedFollower, ScriptedFollowerConfig
+from trade_gym.agents import ScriptedFollower, ScriptedFollowerConfig
 from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, DEFAULT_ACTION_SCALE, ActionScale
 from trade_gym.policy import Policy
 
@@ -38,11 +38,11 @@ class RandomPolicy:
 
 
 def learned_unavailable_reason() -> str | None:
-    """None when `agents.learned.LearnedFollower()` loads its default model, else why it does not."""
+    """None when `trade_gym.agents.learned.LearnedFollower()` loads its default model, else why it does not."""
     try:
-        from agents.learned import LearnedFollower
+        from trade_gym.agents.learned import LearnedFollower
     except ImportError as exc:
-        return f"agents.learned is not importable ({exc})"
+        return f"trade_gym.agents.learned is not importable ({exc})"
     try:
         LearnedFollower()
     except Exception as exc:  # noqa: BLE001 - any loader failure means "not available here"
@@ -67,7 +67,7 @@ def make_policy(name: str, seed: int, camera_pitch_deg: float,
     if name == "random":
         return RandomPolicy(np.random.default_rng((seed, RANDOM_POLICY_STREAM)))
     if name == "learned":
-        from agents.learned import LearnedFollower
+        from trade_gym.agents.learned import LearnedFollower
 
         return LearnedFollower()
     raise ValueError(f"policy must be one of {POLICY_NAMES}, got {name!r}")

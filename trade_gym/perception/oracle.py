@@ -22,8 +22,8 @@ from trade_gym.perception.base import FloatArray, GroundEstimate, PerceptionOutp
 MIN_BOX_SIDE_PX = 1.0
 N_NORMAL_DRAWS = 11
 N_CORRELATED = 10  # box (4), position (3), velocity (3) follow the Gauss-Markov process; ground stays white
-# The fitted first-fix delay [s] (agents.train trains with it). OracleConfig's default stays 0: the estimate's NaN
-# depth in info before the first fix defeats gymnasium's check_env (NaN != NaN).
+# The fitted first-fix delay [s] (trade_gym.agents.train trains with it). OracleConfig's default stays 0: the
+# estimate's NaN depth in info before the first fix defeats gymnasium's check_env (NaN != NaN).
 FITTED_FIRST_FIX_DELAY_S = 2.6
 GROUND_DRAW = 10  # the draw for the ground's depth factor
 

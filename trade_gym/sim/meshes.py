@@ -13,12 +13,13 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
+from trade_gym.assets import ASSETS_DIR
 from trade_gym.sim.bullet_lists import bullet_list
 from trade_gym.sim.mesh_files import mesh_visual_shape
 
 FloatArray = npt.NDArray[np.float64]
 
-TEXTURE_DIR = Path(__file__).resolve().parents[2] / "assets" / "textures"
+TEXTURE_DIR = ASSETS_DIR / "textures"
 # World size of one texture repeat [m] (make_assets.py sizes the texture features from these).
 TEXTURE_PERIOD_M = {
     "desert_ground": 32.0, "city_ground": 40.0, "mountain_ground": 40.0, "roof": 16.0, "facade": 6.0,
@@ -33,7 +34,7 @@ ROCK_PROTOTYPE_SEED = 20240611  # fixed: rock shapes are assets, not per-episode
 
 
 def texture_path(name: str) -> Path:
-    """assets/textures/<name>.png; FileNotFoundError says how to generate it."""
+    """TEXTURE_DIR/<name>.png (the repo's assets/textures); FileNotFoundError says how to generate it."""
     path = TEXTURE_DIR / f"{name}.png"
     if not path.is_file():
         raise FileNotFoundError(f"missing texture {path}; run `python scripts/make_assets.py`")
