@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -111,7 +112,8 @@ class Imu:
         """(3,) current gyro bias [rad/s] (after the last delivered sample)."""
         return self._bias[3:].copy()
 
-    def add_truth(self, t_s: float, specific_force_body: npt.ArrayLike, gyro_body: npt.ArrayLike) -> None:
+    def add_truth(self, t_s: float, specific_force_body: Sequence[float] | FloatArray,
+                  gyro_body: Sequence[float] | FloatArray) -> None:
         """Store truth at `t_s` [s]: specific force (3,) body [m/s^2], angular rate (3,) body [rad/s]."""
         f, w = specific_force_body, gyro_body
         self._truth.append((float(t_s), float(f[0]), float(f[1]), float(f[2]),
