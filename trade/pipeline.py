@@ -19,7 +19,9 @@ import numpy as np
 import numpy.typing as npt
 
 from trade.depth_only import DepthOnlyConfig, DepthOnlyLocaliser
-from trade.frame_guard import OUT_OF_VIEW, FrameGuardConfig, TrackedFrame, predicted_out_of_view, unusable_frame
+from trade.frame_guard import (
+    MISSING, OUT_OF_VIEW, FrameGuardConfig, TrackedFrame, predicted_out_of_view, unusable_frame,
+)
 from trade.geometry import CameraIntrinsics, Pose, RotationWarp
 from trade.ground_filter import DepthPredictor, GroundFilter, GroundFilterConfig
 from trade.planes import MultiRansacConfig, Plane, multi_ransac
@@ -221,10 +223,11 @@ class TradePipeline:
             self._check_image(image_rgb)
         if not math.isfinite(t_s):
             raise ValueError(f"frame time must be finite, got t_s={t_s!r}")
+        if image_rgb is None:  # the guards' first reason (`unusable_frame`)
+            return self._coast(t_s, T_world_cam, MISSING, last)
         reason = self._coast_reason(image_rgb, T_world_cam, t_s, previous)
         if reason is not None:
             return self._coast(t_s, T_world_cam, reason, last)
-        assert image_rgb is not None  # no image is a coast reason (frame_guard.MISSING)
         start = time.perf_counter()
         prediction = self._predict_pixel(t_s, T_world_cam)
         predicted_px = prediction.centre_px
@@ -251,7 +254,7 @@ class TradePipeline:
         state = self.trajectory.state
         return self.trajectory.predict(t_s) if t_s > state.t_s else state
 
-    def _coast_reason(self, image_rgb: npt.NDArray[np.uint8] | None, T_world_cam: Pose, t_s: float,
+    def _coast_reason(self, image_rgb: npt.NDArray[np.uint8], T_world_cam: Pose, t_s: float,
                       previous: TrackedFrame) -> str | None:
         """Why this frame is not tracked after the `previous` tracked one (a `trade.frame_guard` reason), None when
         it is tracked. With trajectory guidance a usable frame is still refused while the model puts the target out
