@@ -33,7 +33,7 @@ def is_positive_number(value: object) -> bool:
     return is_finite_number(value) and value > 0
 
 
-def is_int_at_least(value: object, lowest: float, numpy_ints: bool = True) -> bool:
+def is_int_at_least(value: object, lowest: float, numpy_ints: bool = True) -> TypeGuard[int | np.integer]:
     """An integer >= `lowest`, not a bool; numpy integers count unless `numpy_ints` is False (a value that goes to
     JSON or to pybullet as is)."""
     types = (int, np.integer) if numpy_ints else (int,)
