@@ -17,6 +17,8 @@ from trade.types import BBox
 
 FloatArray = npt.NDArray[np.float64]
 ImageRGB = npt.NDArray[np.uint8]
+# OpenCV's stubs type every result as "an integer or float array"; the casts below name the dtype each call keeps
+# (uint8 masks through threshold and morphology, float32 histograms through calcHist and sepFilter2D)
 Mask = npt.NDArray[np.uint8]
 Histogram = npt.NDArray[np.float32]
 
