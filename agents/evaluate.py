@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +43,7 @@ def _model_sha256(model: Path, given: str | None) -> str | None:
     return json.loads(record.read_text())["onnx_sha256"] if record.is_file() else None
 
 
-def evaluate(model: Path, sha256: str | None, scenes: Sequence[str], worlds: Sequence[int], steps: int,
+def evaluate(model: Path, sha256: str, scenes: Sequence[str], worlds: Sequence[int], steps: int,
              env_kwargs: dict[str, Any]) -> dict[str, Any]:
     """Per scene, per follower: the per-world scores and their means; the learned / scripted distance ratio."""
     refuse_evaluation_worlds(worlds, "trade_gym.agents.evaluate --worlds")
@@ -52,7 +52,7 @@ def evaluate(model: Path, sha256: str | None, scenes: Sequence[str], worlds: Seq
     for scene in scenes:
         env = TradeFollowEnv(scene=scene, episode_duration_s=steps / CAMERA_RATE_HZ, **env_kwargs)
         try:
-            followers = {
+            followers: dict[str, Callable[[], ScriptedFollower | LearnedFollower]] = {
                 "scripted": lambda: ScriptedFollower(ScriptedFollowerConfig(
                     camera_pitch_deg=env.config.camera_pitch_deg,
                     max_speed_horizontal_mps=env.action_scale.horizontal_mps,
@@ -91,8 +91,10 @@ def main(argv: list[str] | None = None) -> None:
     worlds = list(range(args.worlds[0], args.worlds[1] + 1))
     if not worlds or any(w not in DEVELOPMENT for w in worlds):
         p.error(f"--worlds must be development worlds ({DEVELOPMENT.first}..{DEVELOPMENT.last}), got {args.worlds}")
-    result = evaluate(args.model, _model_sha256(args.model, args.sha256), args.scenes, worlds, args.steps,
-                      {"perception": "oracle"} | dict(args.env))
+    sha256 = _model_sha256(args.model, args.sha256)
+    if sha256 is None:
+        p.error(f"--sha256 is needed: no train_record.json beside {args.model}")
+    result = evaluate(args.model, sha256, args.scenes, worlds, args.steps, {"perception": "oracle"} | dict(args.env))
     if args.out is not None:
         args.out.write_text(json.dumps(result, indent=2))
     for scene, r in result["scenes"].items():

@@ -13,8 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from gymnasium import spaces
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.sac.policies import SACPolicy
 
 from trade_gym.action import ACTION_DIM
 from trade_gym.agents.obs_flatten import N_FEATURES
@@ -29,26 +31,36 @@ VERIFY_FEATURE_STD = 2.0  # random verification features ~ N(0, 2^2), inside the
 class DeterministicActor(torch.nn.Module):
     """features (N, F) -> deterministic env action (N, 4), as SB3's `predict(deterministic=True)`."""
 
+    # the buffers registered in __init__ (torch types a module's attributes only as tensor or module)
+    embed: torch.Tensor
+    low: torch.Tensor
+    high: torch.Tensor
+
     def __init__(self, model: BaseAlgorithm) -> None:
         super().__init__()
-        self.policy = model.policy
-        self.is_ppo = isinstance(self.policy, ActorCriticPolicy)
-        self.pad = ACTION_DIM - int(model.action_space.shape[0])
+        policy, space = model.policy, model.action_space
+        if not isinstance(policy, (ActorCriticPolicy, SACPolicy)) or not isinstance(space, spaces.Box):
+            raise TypeError(f"export needs a PPO or SAC policy on a Box action space, got {type(policy).__name__} "
+                            f"on {space}")
+        self.policy = policy
+        self.pad = ACTION_DIM - int(space.shape[0])
         if self.pad < 0:
-            raise ValueError(f"policy action dim {model.action_space.shape[0]} exceeds the env's {ACTION_DIM}")
+            raise ValueError(f"policy action dim {space.shape[0]} exceeds the env's {ACTION_DIM}")
         self.register_buffer("embed", torch.eye(ACTION_DIM - self.pad, ACTION_DIM))
-        self.register_buffer("low", torch.as_tensor(model.action_space.low, dtype=torch.float32))
-        self.register_buffer("high", torch.as_tensor(model.action_space.high, dtype=torch.float32))
+        self.register_buffer("low", torch.as_tensor(space.low, dtype=torch.float32))
+        self.register_buffer("high", torch.as_tensor(space.high, dtype=torch.float32))
 
     def forward(self, features: torch.Tensor) -> torch.Tensor:
-        if self.is_ppo:
-            # a = clip(W_a h(x) + b_a, low, high), h = the actor MLP on the flattened features
-            latent = self.policy.mlp_extractor.forward_actor(
-                self.policy.extract_features(features, self.policy.pi_features_extractor))
-            action = torch.clamp(self.policy.action_net(latent), self.low, self.high)
+        policy = self.policy
+        if isinstance(policy, ActorCriticPolicy):
+            # a = clip(W_a h(x) + b_a, low, high), h = the actor MLP on the flattened features (the actor's own
+            # features where the policy keeps separate actor and critic extractors)
+            extracted = policy.extract_features(features)
+            latent = policy.mlp_extractor.forward_actor(extracted[0] if isinstance(extracted, tuple) else extracted)
+            action = torch.clamp(policy.action_net(latent), self.low, self.high)
         else:
             # SAC: a = tanh(mu(x)) rescaled from [-1, 1] to [low, high]
-            mean, _, _ = self.policy.actor.get_action_dist_params(features)
+            mean, _, _ = policy.actor.get_action_dist_params(features)
             squashed = torch.tanh(mean)
             action = self.low + (squashed + 1.0) * 0.5 * (self.high - self.low)
         if self.pad:

@@ -101,38 +101,43 @@ class LearnedFollower:
         """observation: Dict with (k,) values or a batch of (N, k) values -> action (4,) or (N, 4) float32."""
         features, batched = flatten_observation(observation)
         (action,) = self._session.run(None, {self._input_name: features})
-        self._start_episodes(len(features), episode_start)
-        action = np.asarray(action, dtype=np.float32) * self._soft_start_scale()[:, None]
-        action = self._limit_unfixed_accel(action, features[:, POSITION_KNOWN_INDEX] > 0.0)
+        frames, last_action = self._start_episodes(len(features), episode_start)
+        action = np.asarray(action, dtype=np.float32) * self._soft_start_scale(frames)[:, None]
+        action = self._limit_unfixed_accel(action, last_action, features[:, POSITION_KNOWN_INDEX] > 0.0)
         return (action if batched else action[0]), state
 
-    def _start_episodes(self, n: int, episode_start: np.ndarray | None) -> None:
-        """Restart the per-env state of the envs starting an episode (all of them on a first call or a new N)."""
-        if self._frames is None or len(self._frames) != n:
-            self._frames = np.zeros(n, dtype=np.int64)
-            self._last_action = np.zeros((n, ACTION_DIM), dtype=np.float32)
+    def _start_episodes(self, n: int, episode_start: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Restart the per-env state of the envs starting an episode (all of them on a first call or a new N);
+        that state: the (n,) frame counts and (n, ACTION_DIM) last actions, kept by the follower."""
+        frames, last_action = self._frames, self._last_action
+        if frames is None or last_action is None or len(frames) != n:
+            frames = self._frames = np.zeros(n, dtype=np.int64)
+            last_action = self._last_action = np.zeros((n, ACTION_DIM), dtype=np.float32)
         if episode_start is not None:
             starts = np.asarray(episode_start, dtype=bool).reshape(-1)
-            self._frames[starts] = 0
-            self._last_action[starts] = 0.0
+            frames[starts] = 0
+            last_action[starts] = 0.0
+        return frames, last_action
 
-    def _limit_unfixed_accel(self, action: np.ndarray, position_known: np.ndarray) -> np.ndarray:
+    def _limit_unfixed_accel(self, action: np.ndarray, last_action: np.ndarray,
+                             position_known: np.ndarray) -> np.ndarray:
         """(n, ACTION_DIM) actions whose horizontal setpoint, where the 3D position is not known yet, moved from the
-        last frame's by at most max_accel_unfixed_mps2 / CAMERA_RATE_HZ [m/s]; remembered as the last actions."""
-        step = action[:, HORIZONTAL] - self._last_action[:, HORIZONTAL]
+        `last_action`'s by at most max_accel_unfixed_mps2 / CAMERA_RATE_HZ [m/s]; remembered as the last actions."""
+        step = action[:, HORIZONTAL] - last_action[:, HORIZONTAL]
         norm = np.linalg.norm(step, axis=1)
         over = ~position_known & (norm > self._max_step)  # the envs whose step is cut to _max_step (same direction)
         limited = action.copy()
-        limited[over, HORIZONTAL] = (self._last_action[over, HORIZONTAL]
+        limited[over, HORIZONTAL] = (last_action[over, HORIZONTAL]
                                      + step[over] * (self._max_step / norm[over])[:, None])
         self._last_action = limited
         return limited.copy()
 
-    def _soft_start_scale(self) -> np.ndarray:
-        """(n,) float32 action scale of this frame per env, then one frame more counted."""
+    def _soft_start_scale(self, frames: np.ndarray) -> np.ndarray:
+        """(n,) float32 action scale of this frame per env from its `frames` count, then one frame more counted
+        (in place)."""
         ramp_frames = self.soft_start_s * CAMERA_RATE_HZ
-        scale = np.ones(len(self._frames)) if ramp_frames == 0 else np.minimum(1.0, self._frames / ramp_frames)
-        self._frames += 1
+        scale = np.ones(len(frames)) if ramp_frames == 0 else np.minimum(1.0, frames / ramp_frames)
+        frames += 1
         return scale.astype(np.float32)
 
 

@@ -143,7 +143,7 @@ def build_model(config: TrainConfig, vec_env):
     from stable_baselines3 import PPO, SAC
 
     policy_kwargs = {"net_arch": list(config.hidden_units)}
-    common = dict(learning_rate=config.learning_rate, gamma=config.gamma, seed=config.seed, device="cpu",
+    common: dict[str, Any] = dict(learning_rate=config.learning_rate, gamma=config.gamma, seed=config.seed, device="cpu",
                   tensorboard_log=config.tensorboard_dir, verbose=config.verbose)
     if config.algo == "ppo":
         return PPO("MlpPolicy", vec_env, n_steps=config.n_steps_per_env, batch_size=config.batch_size,
@@ -160,6 +160,8 @@ def warm_start(model, config: TrainConfig) -> dict:
     """Clone the scripted follower into `model` (demonstrations on their own seeds); returns the fit record."""
     from trade_gym.agents.warm_start import warm_start_ppo
 
+    if config.warm_start is None:
+        raise ValueError("warm_start needs TrainConfig.warm_start (the demonstration settings)")
     demo_env = _vec_env(config, flat=False, seed=config.seed + DEMO_SEED_OFFSET)
     try:
         return warm_start_ppo(model.policy, demo_env, config.warm_start, config.seed, config.gamma,

@@ -8,6 +8,7 @@ own first image into one tile grid (one reference for all first images) at a who
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import cast
 
 import cv2
 import numpy as np
@@ -88,4 +89,5 @@ def _klt(reference: ImageGray, current: ImageGray, reference_px: FloatArray, sta
         reference, current, reference_px.astype(np.float32).reshape(-1, 1, 2),
         np.array(start_px, np.float32).reshape(-1, 1, 2), **lk_params, flags=cv2.OPTFLOW_USE_INITIAL_FLOW
     )
-    return points.reshape(-1, 2), found.ravel().astype(bool)
+    # calcOpticalFlowPyrLK returns float32 points (its stubs say only "an integer or float array")
+    return cast(npt.NDArray[np.float32], points.reshape(-1, 2)), found.ravel().astype(np.bool_)

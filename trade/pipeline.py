@@ -12,13 +12,16 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
+from typing import cast
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 
 from trade.depth_only import DepthOnlyConfig, DepthOnlyLocaliser
-from trade.frame_guard import OUT_OF_VIEW, FrameGuardConfig, TrackedFrame, predicted_out_of_view, unusable_frame
+from trade.frame_guard import (
+    MISSING, OUT_OF_VIEW, FrameGuardConfig, TrackedFrame, predicted_out_of_view, unusable_frame,
+)
 from trade.geometry import CameraIntrinsics, Pose, RotationWarp
 from trade.ground_filter import DepthPredictor, GroundFilter, GroundFilterConfig
 from trade.planes import MultiRansacConfig, Plane, multi_ransac
@@ -36,6 +39,11 @@ FloatArray = npt.NDArray[np.float64]
 # The paper's rule: planes whose normals are < 15 deg apart are one solution and the flattest
 # wins, so a roof parallel to the ground competes with it (the ground mask must remove it).
 PAPER_RANSAC = MultiRansacConfig(parallel_min_separation_m=math.inf, flatness_tolerance_deg=0.0)
+
+
+def _gray(image_rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
+    """(H, W) uint8 grey levels of an (H, W, 3) uint8 RGB image (cvtColor keeps the depth; its stubs do not say)."""
+    return cast(npt.NDArray[np.uint8], cv2.cvtColor(image_rgb, cv2.COLOR_RGB2GRAY))
 
 
 @dataclass(frozen=True)
@@ -163,10 +171,10 @@ class TradePipeline:
         fusion = replace(config.fusion, min_points=self._min_plane_points) if config.ground_mask else config.fusion
         self.fusion = TemporalPlaneFusion(fusion, rng)
         self.ground = (GroundFilter(config.ground_filter, intrinsics, depth_model, rng)
-                       if config.ground_mask else None)
+                       if config.ground_mask and depth_model is not None else None)
         self.depth_only = (DepthOnlyLocaliser(config.depth_only, intrinsics, depth_model, rng,
                                               config.depth_only_ransac)
-                           if config.single_image_depth else None)
+                           if config.single_image_depth and depth_model is not None else None)
         self._object_height_m = config.object_height_m
         self._tracked: TrackedFrame | None = None  # the last tracked frame (None before initialise)
         self._last: Estimate | None = None  # its estimate
@@ -195,7 +203,7 @@ class TradePipeline:
             self.depth_only.reset()
         self._object_height_m = self.config.object_height_m
         start = time.perf_counter()
-        roi = self.roi.step(cv2.cvtColor(image_rgb, cv2.COLOR_RGB2GRAY), box, T_world_cam)
+        roi = self.roi.step(_gray(image_rgb), box, T_world_cam)
         roi_ms = (time.perf_counter() - start) * 1e3
         est = self._localise(image_rgb, t_s, box, True, 1.0, False, np.full(2, np.nan), roi, T_world_cam,
                              StageTimings(roi_ms=roi_ms))
@@ -208,24 +216,27 @@ class TradePipeline:
         tracks and plane fit are left as they were. `T_world_cam` comes from the pose estimator (VIO); `imu` is
         accepted for pose estimators that fuse it and is not used by the stack itself. ValueError for an image
         that is not (H, W, 3) uint8 or a non-finite time."""
-        if self._tracked is None:
+        previous, last = self._tracked, self._last
+        if previous is None or last is None:
             raise RuntimeError("TradePipeline.step() before initialise()")
         if image_rgb is not None:
             self._check_image(image_rgb)
         if not math.isfinite(t_s):
             raise ValueError(f"frame time must be finite, got t_s={t_s!r}")
-        reason = self._coast_reason(image_rgb, T_world_cam, t_s)
+        if image_rgb is None:  # the guards' first reason (`unusable_frame`)
+            return self._coast(t_s, T_world_cam, MISSING, last)
+        reason = self._coast_reason(image_rgb, T_world_cam, t_s, previous)
         if reason is not None:
-            return self._coast(t_s, T_world_cam, reason)
+            return self._coast(t_s, T_world_cam, reason, last)
         start = time.perf_counter()
         prediction = self._predict_pixel(t_s, T_world_cam)
         predicted_px = prediction.centre_px
-        rotation = RotationWarp.between(self.intrinsics, self._tracked.T_world_cam, T_world_cam)
+        rotation = RotationWarp.between(self.intrinsics, previous.T_world_cam, T_world_cam)
         frame = self.tracking.step(image_rgb, prediction, rotation)
         box, choice, tracked = frame.box, frame.choice, frame.tracked
         tracker_ms = (time.perf_counter() - start) * 1e3
         start = time.perf_counter()
-        roi = self.roi.step(cv2.cvtColor(image_rgb, cv2.COLOR_RGB2GRAY), box, T_world_cam)
+        roi = self.roi.step(_gray(image_rgb), box, T_world_cam)
         roi_ms = (time.perf_counter() - start) * 1e3
         est = self._localise(image_rgb, t_s, box if tracked else None, tracked, choice.score, choice.ambiguous,
                              predicted_px, roi, T_world_cam, StageTimings(tracker_ms=tracker_ms, roi_ms=roi_ms))
@@ -243,10 +254,12 @@ class TradePipeline:
         state = self.trajectory.state
         return self.trajectory.predict(t_s) if t_s > state.t_s else state
 
-    def _coast_reason(self, image_rgb: npt.NDArray[np.uint8] | None, T_world_cam: Pose, t_s: float) -> str | None:
-        """Why this frame is not tracked (a `trade.frame_guard` reason), None when it is tracked. With trajectory
-        guidance a usable frame is still refused while the model puts the target out of view."""
-        reason = unusable_frame(image_rgb, T_world_cam, t_s, self._tracked, self.config.guard)
+    def _coast_reason(self, image_rgb: npt.NDArray[np.uint8], T_world_cam: Pose, t_s: float,
+                      previous: TrackedFrame) -> str | None:
+        """Why this frame is not tracked after the `previous` tracked one (a `trade.frame_guard` reason), None when
+        it is tracked. With trajectory guidance a usable frame is still refused while the model puts the target out
+        of view."""
+        reason = unusable_frame(image_rgb, T_world_cam, t_s, previous, self.config.guard)
         if reason is None and self.config.tracker.trajectory_guidance and self.trajectory.initialized:
             position = self._predict_to(t_s).position_m
             if predicted_out_of_view(position, T_world_cam, self.intrinsics,
@@ -254,16 +267,15 @@ class TradePipeline:
                 return OUT_OF_VIEW
         return reason
 
-    def _coast(self, t_s: float, T_world_cam: Pose, reason: str) -> Estimate:
+    def _coast(self, t_s: float, T_world_cam: Pose, reason: str, last: Estimate) -> Estimate:
         """A frame not tracked: the trajectory model predicts the target to t_s (NaN before its first fix), the
-        depth is that position's camera-frame z, no box; the ground is the last tracked frame's."""
+        depth is that position's camera-frame z, no box; the ground is the `last` tracked frame's estimate's."""
         position, velocity = np.full(3, np.nan), np.full(3, np.nan)
         depth = float("nan")
         if self.trajectory.initialized:
             state = self._predict_to(t_s)
             position, velocity = state.position_m, state.velocity_mps
             depth = float(T_world_cam.inverse().apply(position.reshape(1, 3))[0, 2])
-        last = self._last
         return Estimate(t_s=t_s, box=None, tracked=False, peak_score=float("nan"), ambiguous=False,
                         predicted_px=np.full(2, np.nan), position_world_m=position, velocity_world_mps=velocity,
                         depth_m=depth, depth_sigma_m=float("nan"), plane=last.plane,
@@ -349,10 +361,10 @@ class TradePipeline:
         K = self.intrinsics
         return max(box.w_px / K.fx_px, box.h_px / K.fy_px) * depth_m >= object_height_m
 
-    def _locate_depth_only(self, image_rgb: npt.NDArray[np.uint8], box: BBox | None, roi: RoiFeatures,
-                           T_world_cam: Pose, timings: StageTimings) -> _Fix:
+    def _locate_depth_only(self, depth_only: DepthOnlyLocaliser, image_rgb: npt.NDArray[np.uint8], box: BBox | None,
+                           roi: RoiFeatures, T_world_cam: Pose, timings: StageTimings) -> _Fix:
         """Depth-only mode: the target's depth read from the aligned single-image depth map at the box."""
-        est = self.depth_only.update(image_rgb, roi, box, T_world_cam)
+        est = depth_only.update(image_rgb, roi, box, T_world_cam)
         timings = replace(timings, depth_only_ms=est.model_ms + est.align_ms)
         return _Fix(est.position_world_m, est.depth_m, est.sigma_m, None, 0, est.depth_map_m, timings)
 
@@ -360,8 +372,10 @@ class TradePipeline:
                   score: float, ambiguous: bool, predicted_px: FloatArray, roi: RoiFeatures, T_world_cam: Pose,
                   timings: StageTimings) -> Estimate:
         cfg = self.config
-        locate = self._locate_depth_only if self.depth_only is not None else self._locate_on_plane
-        fix = locate(image_rgb, box, roi, T_world_cam, timings)
+        if self.depth_only is not None:
+            fix = self._locate_depth_only(self.depth_only, image_rgb, box, roi, T_world_cam, timings)
+        else:
+            fix = self._locate_on_plane(image_rgb, box, roi, T_world_cam, timings)
         depth = fix.depth_m
         start = time.perf_counter()
         state = self._update_trajectory(t_s, fix.position_world_m, fix.sigma_m)

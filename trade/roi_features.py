@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -70,7 +71,7 @@ class RoiConfig:
             value, low = getattr(self, name), 0 if name == "klt_pyramid_levels" else 1
             if int(value) != value or value < low:
                 raise ValueError(f"RoiConfig.{name} must be an integer >= {low}, got {value!r}")
-        positive = ("roi_margin_factor", "harris_quality_level", "klt_epsilon_px", "fb_threshold_px")
+        positive: tuple[str, ...] = ("roi_margin_factor", "harris_quality_level", "klt_epsilon_px", "fb_threshold_px")
         positive += ("pixel_sigma_px", "max_ray_gap_px", "promote_sigma_m", "anchor_max_shift_px")
         for name in positive:
             value = getattr(self, name)
@@ -203,7 +204,7 @@ class RoiFeatureTracker:
         diameter_px = 2 * math.ceil(config.min_feature_distance_px) + 1
         self._erode_kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (diameter_px, diameter_px))
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, config.klt_max_iterations, config.klt_epsilon_px)
-        self._lk = dict(winSize=(config.klt_window_px,) * 2, maxLevel=config.klt_pyramid_levels, criteria=criteria)
+        self._lk: dict[str, Any] = dict(winSize=(config.klt_window_px,) * 2, maxLevel=config.klt_pyramid_levels, criteria=criteria)
         self._anchor_lk = {**self._lk, "maxLevel": 0}  # the start is within a pixel or two of the answer
         self.reset()
 
@@ -229,7 +230,8 @@ class RoiFeatureTracker:
             size = (self.intrinsics.height_px, self.intrinsics.width_px)
             raise ValueError(f"step needs a uint8 {size} image, got {gray.dtype} {gray.shape}")
         xs, ys = roi_tile_edges(box, self.config.roi_margin_factor)
-        alive = self._track(gray) if self._prev is not None and len(self._ids) else np.ones(len(self._ids), bool)
+        alive = (self._track(self._prev, gray) if self._prev is not None and len(self._ids)
+                 else np.ones(len(self._ids), bool))
         tiles = tile_index(self._px.astype(np.float64), xs, ys)
         keep = alive & (tiles >= 0) & (tiles != CENTRE_TILE)
         keep[keep] = _oldest_per_tile(tiles[keep], self._ids[keep], self.config.max_features_per_tile)
@@ -237,17 +239,18 @@ class RoiFeatureTracker:
         self._fuse(T_world_cam)
         self._top_up(gray, xs, ys, T_world_cam)
         self._prev = gray.copy()
-        self._keep_anchors()
+        self._keep_anchors(self._prev)
         self._frame += 1
         return self._output(T_world_cam, xs, ys)
 
-    def _track(self, gray: npt.NDArray[np.uint8]) -> BoolArray:
+    def _track(self, prev: npt.NDArray[np.uint8], gray: npt.NDArray[np.uint8]) -> BoolArray:
         """KLT prev -> current, then back; keep tracks with both found, round trip < fb threshold, in image."""
         p0 = self._px.reshape(-1, 1, 2)
-        p1, st1, _ = cv2.calcOpticalFlowPyrLK(self._prev, gray, p0, None, **self._lk)
-        p0_back, st2, _ = cv2.calcOpticalFlowPyrLK(gray, self._prev, p1, None, **self._lk)
+        p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev, gray, p0, None, **self._lk)
+        p0_back, st2, _ = cv2.calcOpticalFlowPyrLK(gray, prev, p1, None, **self._lk)
         fb_px = np.linalg.norm((p0_back - p0).reshape(-1, 2), axis=1)
-        self._px = p1.reshape(-1, 2)
+        # float32 points (OpenCV's stubs say only "an integer or float array")
+        self._px = cast(npt.NDArray[np.float32], p1.reshape(-1, 2))
         found = st1.ravel().astype(bool) & st2.ravel().astype(bool) & (fb_px < self.config.fb_threshold_px)
         if self.config.anchor_to_first_image:
             self._refine_against_anchors(gray, found)
@@ -267,14 +270,14 @@ class RoiFeatureTracker:
         take = status & (shift_px <= self.config.anchor_max_shift_px)
         self._px[idx[take]] = refined[take]
 
-    def _keep_anchors(self) -> None:
-        """Keep the first images of live tracks only, adding this frame's if tracks started in it."""
+    def _keep_anchors(self, image: npt.NDArray[np.uint8]) -> None:
+        """Keep the first images of live tracks only, adding this frame's `image` if tracks started in it."""
         if not self.config.anchor_to_first_image:
             return
         live = set(np.unique(self._birth).tolist())
         self._anchors = {birth: image for birth, image in self._anchors.items() if birth in live}
         if self._frame in live:
-            self._anchors[self._frame] = self._prev
+            self._anchors[self._frame] = image
 
     def _select(self, keep: BoolArray) -> None:
         for name in ("_ids", "_px", "_first_px", "_first_center", "_first_ray", "_inv_mu", "_precision", "_promoted",

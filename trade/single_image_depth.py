@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import cv2
 import numpy as np
@@ -72,12 +73,14 @@ class SingleImageDepth:
         h, w = img.shape[:2]
         s = self.input_size_px
         shrink = h > s or w > s
-        resized = cv2.resize(img, (s, s), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+        # cv2.resize keeps the dtype (its stubs say only "an integer or float array")
+        resized = cast(npt.NDArray[np.uint8], cv2.resize(img, (s, s), interpolation=cv2.INTER_AREA if shrink
+                                                         else cv2.INTER_LINEAR))
         (out,) = self._session.run(None, {self._input_name: to_network_input(resized)})
         inv = np.asarray(out, dtype=np.float32).reshape(s, s)
         if (h, w) == (s, s):
             return inv
-        return cv2.resize(inv, (w, h), interpolation=cv2.INTER_LINEAR)
+        return cast(npt.NDArray[np.float32], cv2.resize(inv, (w, h), interpolation=cv2.INTER_LINEAR))
 
 
 def _check_io(session: ort.InferenceSession, path: Path, size_px: int) -> str:

@@ -121,13 +121,13 @@ class TemporalPlaneFusion:
         fit = multi_ransac(points, self.config.ransac, self._rng, query_xy)
         return points[:0] if fit is None else points[fit.inlier_mask]
 
-    def _outvoting_inliers(self, points: FloatArray, query_xy: FloatArray | None) -> FloatArray | None:
-        """The gated-out frame's own plane inliers when they outnumber the fused plane's (`outvoted_reinit`), else
+    def _outvoting_inliers(self, plane: Plane, points: FloatArray, query_xy: FloatArray | None) -> FloatArray | None:
+        """The gated-out frame's own plane inliers when they outnumber the fused `plane`'s (`outvoted_reinit`), else
         None. A frame with no more points than the fused plane's inliers cannot outvote it and is not fitted."""
-        if not self.config.outvoted_reinit or points.shape[0] <= self._plane.n_inliers:
+        if not self.config.outvoted_reinit or points.shape[0] <= plane.n_inliers:
             return None
         own = self._bootstrap_inliers(points, query_xy)
-        return own if own.shape[0] > self._plane.n_inliers else None
+        return own if own.shape[0] > plane.n_inliers else None
 
     def update(self, points_world: FloatArray, query_xy: FloatArray | None = None) -> FusionResult:
         """points_world: (N, 3) world [m] ground inliers of this frame; query_xy: (2,) world [m]
@@ -143,7 +143,7 @@ class TemporalPlaneFusion:
             accepted = pts[np.abs(self._plane.signed_distance(pts)) <= gate_m]
             gated_out = pts.shape[0] >= self.config.min_points > accepted.shape[0]
             self._n_gated_frames = self._n_gated_frames + 1 if gated_out else 0
-            own = self._outvoting_inliers(pts, query_xy) if gated_out else None
+            own = self._outvoting_inliers(self._plane, pts, query_xy) if gated_out else None
             if own is not None or (gated_out and 0 < self.config.max_gated_frames <= self._n_gated_frames):
                 self.reset()  # the ground moved for good, or the plane was outvoted: start over from this frame
                 gate_m, reinitialised = float("inf"), True

@@ -93,7 +93,7 @@ def process_noise(dt_s: float, config: TrajectoryConfig) -> FloatArray:
             [dt**3 / 6.0, dt**2 / 2.0, dt],
         ]
     )
-    return np.kron(block, _I3)  # state ordered [p(3), v(3), a(3)]: block (i, j) multiplies I3
+    return np.kron(block, _I3).astype(np.float64, copy=False)  # state ordered [p(3), v(3), a(3)]: block (i, j) multiplies I3
 
 
 def measurement_matrix() -> FloatArray:
@@ -131,9 +131,9 @@ class TrajectoryModel:
 
     @property
     def state(self) -> TrajectoryState:
-        self._require_initialized()
+        t_s = self._require_initialized()
         x = self._kf.x[:, 0]
-        return TrajectoryState(x[0:3].copy(), x[3:6].copy(), x[6:9].copy(), self._kf.P.copy(), float(self._t_s))
+        return TrajectoryState(x[0:3].copy(), x[3:6].copy(), x[6:9].copy(), self._kf.P.copy(), t_s)
 
     def reset(self, position_m: npt.ArrayLike, t_s: float) -> TrajectoryState:
         """Start at position_m (3,) world [m], at rest, at time t_s [s]."""
@@ -148,10 +148,10 @@ class TrajectoryModel:
 
     def predict(self, t_s: float) -> TrajectoryState:
         """Advance the state to time t_s [s] (>= current time); x = F x, P = F P F^T + Q per sub-step."""
-        self._require_initialized()
-        dt_s = float(t_s) - self._t_s
+        t0_s = self._require_initialized()
+        dt_s = float(t_s) - t0_s
         if not (math.isfinite(dt_s) and dt_s >= 0.0):
-            raise ValueError(f"predict needs t_s >= the state time {self._t_s}, got t_s={t_s!r}")
+            raise ValueError(f"predict needs t_s >= the state time {t0_s}, got t_s={t_s!r}")
         n, h = _substeps(dt_s, self.config.max_step_s)
         if n:
             F, Q = transition_matrix(h, self.config), process_noise(h, self.config)
@@ -192,6 +192,8 @@ class TrajectoryModel:
             out[k] = x[0:3]
         return out
 
-    def _require_initialized(self) -> None:
+    def _require_initialized(self) -> float:
+        """The state time [s]; RuntimeError before the first reset."""
         if self._t_s is None:
             raise RuntimeError("TrajectoryModel used before reset(position_m, t_s)")
+        return self._t_s

@@ -6,6 +6,7 @@ Boxes are (x, y, w, h) in pixels with (x, y) the top-left corner; IMU in body fr
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,7 +47,7 @@ class BBox:
         return np.array([self.x_px, self.y_px, self.w_px, self.h_px])
 
 
-def iou(a: npt.ArrayLike, b: npt.ArrayLike) -> float:
+def iou(a: Sequence[float], b: Sequence[float]) -> float:
     """IoU of two (x, y, w, h) boxes; 0.0 when either is missing (NaN or inf) or empty.
 
     Scalar code without generators or builtin min/max calls: the env scores the estimate against the

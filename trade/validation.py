@@ -7,11 +7,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Collection, Mapping
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeGuard, TypeVar
 
 import numpy as np
 
-Config = TypeVar("Config")
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+Config = TypeVar("Config", bound="DataclassInstance")
 
 
 def require(ok: bool, name: str, value: object, requirement: str) -> None:
@@ -20,7 +23,7 @@ def require(ok: bool, name: str, value: object, requirement: str) -> None:
         raise ValueError(f"{name} must be {requirement}, got {value!r}")
 
 
-def is_finite_number(value: object) -> bool:
+def is_finite_number(value: object) -> TypeGuard[float]:
     """A finite Python int or float (numpy float64 is a float), not a bool."""
     return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
 
@@ -30,11 +33,11 @@ def is_positive_number(value: object) -> bool:
     return is_finite_number(value) and value > 0
 
 
-def is_int_at_least(value: object, lowest: int, numpy_ints: bool = True) -> bool:
+def is_int_at_least(value: object, lowest: float, numpy_ints: bool = True) -> TypeGuard[int | np.integer]:
     """An integer >= `lowest`, not a bool; numpy integers count unless `numpy_ints` is False (a value that goes to
     JSON or to pybullet as is)."""
     types = (int, np.integer) if numpy_ints else (int,)
-    return not isinstance(value, bool) and isinstance(value, types) and value >= lowest
+    return not isinstance(value, bool) and isinstance(value, types) and bool(value >= lowest)
 
 
 def check_choice(name: str, value: object, choices: Collection) -> None:
@@ -43,7 +46,8 @@ def check_choice(name: str, value: object, choices: Collection) -> None:
 
 def check_finite_number(name: str, value: object) -> float:
     """`value` as a float; ValueError unless it is a finite number (`is_finite_number`)."""
-    require(is_finite_number(value), name, value, "a finite number")
+    if not is_finite_number(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
     return float(value)
 
 
@@ -71,5 +75,6 @@ def nested_config(name: str, value: object, config_type: type[Config]) -> Config
             raise TypeError(f"{name} has no field {', '.join(map(repr, unknown))}: {config_type.__name__}'s fields "
                             f"are {', '.join(fields)}")
         return config_type(**value)
-    require(isinstance(value, config_type), name, value, f"a {config_type.__name__} or a mapping of its fields")
+    if not isinstance(value, config_type):
+        raise ValueError(f"{name} must be a {config_type.__name__} or a mapping of its fields, got {value!r}")
     return value

@@ -159,7 +159,8 @@ class EnvConfig:
     @property
     def perception_latency_s(self) -> float:
         """The fixed latency [s] ("fixed" mode; 0 otherwise: "measured" measures its own per frame)."""
-        return self.perception_latency_ms / MS_PER_S if self.perception_latency == "fixed" else 0.0
+        ms = self.perception_latency_ms  # given with "fixed" only (`_check_latency`)
+        return ms / MS_PER_S if self.perception_latency == "fixed" and ms is not None else 0.0
 
     @property
     def needs_rendering(self) -> bool:

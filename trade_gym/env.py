@@ -146,6 +146,7 @@ class TradeFollowEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
+    world: World  # the episode's, built by reset() (no attribute before the first reset)
 
     def __init__(self, **kwargs: Any) -> None:
         self.config = EnvConfig(**kwargs)
@@ -161,7 +162,6 @@ class TradeFollowEnv(gym.Env):
         self.camera = Camera(self._client, self.camera_config)
         self._T_cam_body = self.camera.T_body_cam.inverse()
         self.quadrotor = Quadrotor(self._client, self.quad_config)
-        self.world: World | None = None
         self.perception = make_perception(self.config, self.camera.intrinsics, self._frame_truth,
                                           self._true_camera_pose)
         self._last_frame: CameraFrame | None = None
@@ -193,7 +193,7 @@ class TradeFollowEnv(gym.Env):
         self.quadrotor.spawn(start_position, start_yaw)
         self._state = self.quadrotor.read_state()
         self.imu = Imu(self.imu_config, rng)
-        self._prime_imu_at_hover(rng)
+        self.imu.prime_at_rest(self._state.R_world_body, GRAVITY_MPS2, CAMERA_RATE_HZ, rng)
         self.pose_source = make_pose_source(self.config.pose_source, rng=rng, vio_config=self.config.vio)
         self._t_s = 0.0
         self._cache_parked_decoys()
@@ -299,7 +299,7 @@ class TradeFollowEnv(gym.Env):
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         config = state["config"]
-        self.__init__(**{f.name: getattr(config, f.name) for f in fields(config)})
+        TradeFollowEnv.__init__(self, **{f.name: getattr(config, f.name) for f in fields(config)})
         self._np_random, self._np_random_seed = state["np_random"], state["np_random_seed"]
 
     # --------------------------------------------------------------- internals
@@ -352,23 +352,15 @@ class TradeFollowEnv(gym.Env):
 
     def _true_camera_pose(self) -> Pose:
         """The camera's exact pose at the current frame (computed once per frame in `_sense`)."""
+        if self._T_world_cam_true is None:
+            raise RuntimeError("no camera pose before reset()")
         return self._T_world_cam_true
 
     def _frame_truth(self) -> GroundTruth:
         """The current frame's ground truth (computed once per frame in `_sense`): the oracle's provider."""
+        if self._last_truth is None:
+            raise RuntimeError("no ground truth before reset()")
         return self._last_truth
-
-    def _prime_imu_at_hover(self, rng: np.random.Generator) -> None:
-        """The IMU runs before the episode starts: the first observation carries the samples of one frame
-        period (rounded up to whole IMU periods) taken while the drone hovered still at its start pose, so it
-        holds a real, seeded reading (gravity on the body z axis plus noise and bias) instead of zeros."""
-        rate_hz = self.imu_config.rate_hz
-        lead_s = math.ceil(rate_hz / CAMERA_RATE_HZ) / rate_hz
-        self.imu.reset(-lead_s, rng)
-        hover_force_body = self._state.R_world_body.T @ np.array([0.0, 0.0, GRAVITY_MPS2])
-        still = np.zeros(3)
-        self.imu.add_truth(-lead_s, hover_force_body, still)
-        self.imu.add_truth(0.0, hover_force_body, still)
 
     def _sense(self) -> tuple[SensorFrame, GroundTruth]:
         """This frame's ground truth and the sensors perception receives (after any sensor filter)."""
@@ -384,7 +376,7 @@ class TradeFollowEnv(gym.Env):
         self._last_frame = frame
         target_box = self._vehicle_box(self.world.target)
         truth = compute_ground_truth(
-            self._client,
+            self._require_client(),
             self.camera.intrinsics,
             T_world_cam,
             target_box,

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 import cv2
 import gymnasium as gym
@@ -21,6 +21,10 @@ from trade.types import ImuBatch
 from trade.validation import is_finite_number, is_int_at_least, require
 from trade_gym.ground_truth import GroundTruth
 from trade_gym.perception.base import SensorFrame
+from trade_gym.perception.trade_stack import TradePerception
+
+if TYPE_CHECKING:
+    from trade_gym.env import TradeFollowEnv
 
 # Parameters of each kind and their defaults; a Fault's params override them.
 # Overlapping faults apply in this order (the scene first, then the camera's delivery).
@@ -140,6 +144,9 @@ class SensorFaults(gym.Wrapper):
     under the occluder.
     """
 
+    _delivered: SensorFrame | None  # what perception received at the current frame
+    _T_world_cam: Pose | None  # the camera's true pose at the current frame (after `filter_camera_pose`)
+
     def __init__(self, env: gym.Env, schedule: FaultSchedule) -> None:
         super().__init__(env)
         if not hasattr(env.unwrapped, "set_sensor_filter"):
@@ -165,6 +172,11 @@ class SensorFaults(gym.Wrapper):
         self._frame += 1
         obs, reward, terminated, truncated, info = self.env.step(action)
         return obs, reward, terminated, truncated, self._annotate(info)
+
+    @property
+    def _base(self) -> TradeFollowEnv:
+        """The TradeFollow-v0 env under the wrappers (`__init__` checked it has the sensor-filter hook)."""
+        return cast("TradeFollowEnv", self.env.unwrapped)
 
     @property
     def delivered(self) -> SensorFrame | None:
@@ -220,7 +232,7 @@ class SensorFaults(gym.Wrapper):
         if kind == "freeze" and prev is not None and prev.rgb is not None:
             return replace(sensors, rgb=prev.rgb)
         if kind == "occlusion":
-            return replace(sensors, rgb=self._occlude(index, fault, sensors, truth))
+            return replace(sensors, rgb=self._occlude(index, fault, sensors.rgb, sensors.t_s, truth))
         return sensors  # depth_model acts in the model; out_of_view on the camera pose
 
     def _corrupt_imu(self, index: int, fault: Fault, imu: ImuBatch) -> ImuBatch:
@@ -235,17 +247,19 @@ class SensorFaults(gym.Wrapper):
         accel[:n] = gyro[:n] = fault.params["value"]
         return ImuBatch(imu.t_s, accel, gyro)
 
-    def _occlude(self, index: int, fault: Fault, sensors: SensorFrame, truth: GroundTruth) -> npt.NDArray[np.uint8]:
-        """Paint the overpass (a flat roof along the target's path over the fault's window) into the image,
-        seen from the camera's true pose."""
+    def _occlude(self, index: int, fault: Fault, rgb: npt.NDArray[np.uint8], t_s: float,
+                 truth: GroundTruth) -> npt.NDArray[np.uint8]:
+        """Paint the overpass (a flat roof along the target's path over the fault's window) into the image `rgb`
+        of the frame at `t_s` [s], seen from the camera's true pose."""
         roof = self._roofs.get(index)
         if roof is None:  # built at the window's first frame
-            roof = self._roofs[index] = self._roof_polygon(fault, sensors.t_s)
-        rgb, base = sensors.rgb, self.env.unwrapped
+            roof = self._roofs[index] = self._roof_polygon(fault, t_s)
+        if self._T_world_cam is None:
+            raise RuntimeError("SensorFaults: filter_sensors before filter_camera_pose")
         points_cam = self._T_world_cam.inverse().apply(roof)
         if not np.all(points_cam[:, 2] > 0.0):
             return rgb  # part of the roof behind the camera: not drawn
-        uv = base.camera.intrinsics.project(points_cam)
+        uv = self._base.camera.intrinsics.project(points_cam)
         mask = np.zeros(rgb.shape[:2], np.uint8)
         cv2.fillPoly(mask, [np.round(uv).astype(np.int32)], 1)
         out = rgb.copy()
@@ -261,7 +275,7 @@ class SensorFaults(gym.Wrapper):
     def _roof_polygon(self, fault: Fault, t0_s: float) -> npt.NDArray[np.float64]:
         """(2N, 3) world outline [m] of a roof width_m wide, height_m above the target's centre, along the
         target's path over the window starting at t0_s [s], extended by margin_m at both ends."""
-        base = self.env.unwrapped
+        base = self._base
         world, prm, dt, t0 = base.world, fault.params, base.config.frame_dt_s, t0_s
         path = np.array([world.vehicle_pose(world.target, t0 + k * dt)[0] for k in range(fault.duration_frames)])
         heading = world.vehicle_pose(world.target, t0)[1][:, 0]
@@ -283,27 +297,27 @@ class SensorFaults(gym.Wrapper):
         if self._hidden_fraction > 0.0:
             fraction = info["target_visible_fraction"] * (1.0 - self._hidden_fraction)
             info["target_visible_fraction"] = fraction
-            info["target_visible"] = fraction >= self.env.unwrapped.config.visible_fraction_threshold
+            info["target_visible"] = fraction >= self._base.config.visible_fraction_threshold
         self._hidden_fraction = 0.0
         return info
 
     def _start_episode(self) -> None:
-        self._delivered: SensorFrame | None = None
-        self._T_world_cam: Pose | None = None
+        self._delivered = None
+        self._T_world_cam = None
         self._hidden_fraction = 0.0
         self._imu_corrupted: dict[int, int] = {}  # samples corrupted so far, by fault index
         self._roofs: dict[int, npt.NDArray[np.float64]] = {}  # occluder outlines, by fault index
 
     def _install(self) -> None:
-        base = self.env.unwrapped
+        base = self._base
         base.set_sensor_filter(self)
         if any(f.kind == "depth_model" for f in self.schedule.faults):
-            model = getattr(getattr(base, "perception", None), "depth_model", None)
-            if model is None:
+            perception = base.perception
+            if not isinstance(perception, TradePerception) or perception.depth_model is None:
                 raise ValueError("depth_model faults need a perception with a depth model "
                                  "(perception='trade' or 'dcf' with ground_mask=True)")
-            if not isinstance(model, _FaultyDepthModel):
-                base.perception.depth_model = _FaultyDepthModel(model, self)
+            if not isinstance(perception.depth_model, _FaultyDepthModel):
+                perception.depth_model = _FaultyDepthModel(perception.depth_model, self)
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
@@ -330,7 +344,7 @@ class _FaultyDepthModel:
         return inv
 
 
-def _unit_xy(v: npt.ArrayLike) -> npt.NDArray[np.float64]:
+def _unit_xy(v: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """(3,) horizontal unit vector along v (x, y) [-]; (1, 0, 0) for a vertical or zero v."""
     x, y = float(v[0]), float(v[1])
     n = math.hypot(x, y)

@@ -249,8 +249,8 @@ def steps_per_second(steps: int, wall_s: float) -> float:
     return steps / wall_s if wall_s > 0.0 else float("nan")
 
 
-def episode_metrics(infos: Sequence[Info], frame_dt_s: float = FRAME_DT_S) -> dict[str, float | int | bool]:
-    """All scores of one episode, keyed by `METRIC_NAMES`."""
+def episode_metrics(infos: Sequence[Info], frame_dt_s: float = FRAME_DT_S) -> dict[str, float | int | bool | None]:
+    """All scores of one episode, keyed by `METRIC_NAMES` (`success` None where it is undefined)."""
     return {
         "steps": len(infos),
         "visible_fraction": visible_fraction(infos),

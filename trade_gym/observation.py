@@ -61,14 +61,15 @@ def build_observation(
     estimate: PerceptionOutput,
     drone_position_est_m: FloatArray,
     drone_yaw_est_rad: float,
-    drone_velocity_world_mps: FloatArray,
+    drone_velocity_world_mps: FloatArray | None,
     imu: ImuBatch,
     time_lost_s: float,
     estimate_age_s: float,
     image_size_px: int,
 ) -> dict[str, np.ndarray]:
     """Map an estimate and the drone's own state to the observation dict (float32, clipped); `estimate_age_s`
-    is the estimate's age [s] (`trade_gym.latency`).
+    is the estimate's age [s] (`trade_gym.latency`); a drone velocity of None (unknown: a sensor frame without it,
+    `SensorFrame.velocity_world_mps`) is observed as zeros, as a non-finite one is.
 
     Written with scalar math: this runs every env step and numpy's per-call overhead on
     3-vectors would dominate it."""
@@ -92,9 +93,11 @@ def build_observation(
     return {key: flat[lo:hi] for key, lo, hi in _LAYOUT}
 
 
-def _heading(v: FloatArray, c: float, s: float, bound: float) -> list[float]:
+def _heading(v: FloatArray | None, c: float, s: float, bound: float) -> list[float]:
     """R_heading_world v = Rz(yaw)^T v for v (3,) world, c, s = cos, sin of the yaw, clipped to +-bound;
-    zeros when v is not finite (unknown)."""
+    zeros when v is None or not finite (unknown)."""
+    if v is None:
+        return [0.0, 0.0, 0.0]
     x, y, z = v.tolist()
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
         return [0.0, 0.0, 0.0]

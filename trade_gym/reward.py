@@ -25,10 +25,10 @@ the crash penalty is at least the worst loss of flying on until the lost-target 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from trade.validation import is_finite_number, require
-from trade_gym.perception.base import FloatArray
 
 RELATIVE_ERROR_CAP = 1.0  # distance and height errors saturate at one band distance and one follow height
 
@@ -68,7 +68,7 @@ class RewardInputs:
     height_above_target_ground_m: float  # drone height minus the terrain height under the target
     follow_height_m: float  # the scene's nominal height above the ground
     follow_distance_m: float  # the following band's horizontal distance (`trade_gym.scoring.FollowBand`)
-    action: FloatArray
+    action: Sequence[float]  # the ACTION_DIM values applied (`trade_gym.action.clip_action`); () at the reset
     crashed: bool
 
 

@@ -176,7 +176,7 @@ def env_info(truth: GroundTruth, held: ScoredEstimate, frame: EnvFrame, visible_
 
 
 def reward_inputs(truth: GroundTruth, world: World, band: FollowBand, drone_position_m: FloatArray, visible: bool,
-                  action: FloatArray, crashed: bool) -> RewardInputs:
+                  action: Sequence[float], crashed: bool) -> RewardInputs:
     """What the reward is computed from: the task in its own units, from ground truth and the drone's true state;
     `band` is the scene's following band (`follow_band`)."""
     drone, target = drone_position_m, truth.target_position_m

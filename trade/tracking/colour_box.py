@@ -7,6 +7,7 @@ tight box of the target's blob in it, with the plausibility tests that decide wh
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import cv2
 import numpy as np
@@ -16,6 +17,10 @@ from trade.types import BBox
 
 FloatArray = npt.NDArray[np.float64]
 ImageRGB = npt.NDArray[np.uint8]
+# OpenCV's stubs type every result as "an integer or float array"; the casts below name the dtype each call keeps
+# (uint8 masks through threshold and morphology, float32 histograms through calcHist and sepFilter2D)
+Mask = npt.NDArray[np.uint8]
+Histogram = npt.NDArray[np.float32]
 
 # Likelihoods in [0, 1] are back-projected as uint8 round(255 L) (Otsu's threshold works on these).
 _LEVELS = 255
@@ -125,11 +130,12 @@ def _blur_histogram(hist: npt.NDArray[np.float32], passes: int) -> npt.NDArray[n
     """(n, n, n) histogram convolved `passes` times with [1 2 1] / 4 along each axis, zero outside."""
     n = hist.shape[0]
     for _ in range(passes):
-        # axes 0 and 1 as image rows and columns with axis 2 as channels, then axis 2 as columns
-        hist = cv2.sepFilter2D(hist, -1, _BLUR_KERNEL, _BLUR_KERNEL, borderType=cv2.BORDER_CONSTANT)
-        hist = cv2.sepFilter2D(
+        # axes 0 and 1 as image rows and columns with axis 2 as channels, then axis 2 as columns; ddepth -1 keeps
+        # float32 (the casts: OpenCV's stubs say only "an integer or float array")
+        hist = cast(Histogram, cv2.sepFilter2D(hist, -1, _BLUR_KERNEL, _BLUR_KERNEL, borderType=cv2.BORDER_CONSTANT))
+        hist = cast(Histogram, cv2.sepFilter2D(
             hist.reshape(n * n, n), -1, _BLUR_KERNEL, _IDENTITY_KERNEL, borderType=cv2.BORDER_CONSTANT
-        ).reshape(n, n, n)
+        ).reshape(n, n, n))
     return hist
 
 
@@ -142,7 +148,7 @@ def _eroded(mask: npt.NDArray[np.uint8], radius_px: int) -> npt.NDArray[np.uint8
     """Mask eroded by a (2 r + 1)^2 square, outside counting as background; the mask itself if that empties it."""
     if radius_px <= 0:
         return mask
-    core = cv2.erode(mask, _square_kernel(radius_px), borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    core = cast(Mask, cv2.erode(mask, _square_kernel(radius_px), borderType=cv2.BORDER_CONSTANT, borderValue=0))
     return core if core.any() else mask
 
 
@@ -165,7 +171,7 @@ class ColourBoxRefiner:
 
     def _density(self, pixels: ImageRGB, mask: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
         """Normalised, smoothed (n, n, n) colour histogram of the (h, w, 3) pixels under the (h, w) mask."""
-        hist = cv2.calcHist([pixels], _CHANNELS, mask, self._hist_size, _RANGES)
+        hist = cast(Histogram, cv2.calcHist([pixels], _CHANNELS, mask, self._hist_size, _RANGES))  # float32 counts
         hist = _blur_histogram(hist, self.config.histogram_blur_passes)
         total = float(hist.sum())
         return hist / total if total > 0 else hist
@@ -258,7 +264,7 @@ class ColourBoxRefiner:
     def likelihood_map(self, image_rgb: ImageRGB) -> npt.NDArray[np.float32]:
         """(h, w) P(target | colour) in [0, 1] (steps of 1/255) of an (h, w, 3) uint8 RGB image or crop."""
         _check_image(image_rgb)
-        return self._quantised_likelihood(image_rgb).astype(np.float32) / _LEVELS
+        return self._quantised_likelihood(image_rgb).astype(np.float32) / np.float32(_LEVELS)
 
     def refine(self, image_rgb: ImageRGB, center_px: npt.ArrayLike, box: BBox,
                size_reference: BBox | None = None) -> BoxRefinement | None:
@@ -276,9 +282,9 @@ class ColourBoxRefiner:
         like = self._quantised_likelihood(image_rgb[rows, cols])
         otsu, _ = cv2.threshold(like, 0, 1, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
         threshold = float(np.clip(otsu, round(cfg.min_threshold * _LEVELS), round(cfg.max_threshold * _LEVELS)))
-        _, fg = cv2.threshold(like, threshold, 1, cv2.THRESH_BINARY)  # fg = L > threshold
+        fg = cast(Mask, cv2.threshold(like, threshold, 1, cv2.THRESH_BINARY)[1])  # fg = L > threshold
         if cfg.closing_radius_px > 0:
-            fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, _square_kernel(cfg.closing_radius_px))
+            fg = cast(Mask, cv2.morphologyEx(fg, cv2.MORPH_CLOSE, _square_kernel(cfg.closing_radius_px)))
         center_win = center - [cols.start, rows.start]
         blob = self._blob_at(fg, center_win)
         if blob is None:
@@ -316,7 +322,7 @@ class ColourBoxRefiner:
         if radius == 0:
             return blob
         kernel = _square_kernel(radius)
-        core = self._blob_at(cv2.morphologyEx(blob.astype(np.uint8), cv2.MORPH_OPEN, kernel), center_win)
+        core = self._blob_at(cast(Mask, cv2.morphologyEx(blob.astype(np.uint8), cv2.MORPH_OPEN, kernel)), center_win)
         if core is None:
             return blob
         return blob & (cv2.dilate(core.astype(np.uint8), kernel) > 0)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -26,6 +27,14 @@ from trade.types import BBox, PixelPrediction
 
 FloatArray = npt.NDArray[np.float64]
 ImageRGB = npt.NDArray[np.uint8]
+T = TypeVar("T")
+
+
+def _after_init(value: T | None) -> T:
+    """`value`, one of the tracker's states that `GuidedTracker.init` sets; RuntimeError before init."""
+    if value is None:
+        raise RuntimeError("GuidedTracker.init must be called before using the tracker")
+    return value
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,9 +135,10 @@ class GuidedTracker:
         centre = rotation.apply(self.dcf.box.center)
         if np.all(np.isfinite(centre)):
             self.dcf.commit(centre)
-        centre = rotation.apply(self._box.center)
+        box = _after_init(self._box)
+        centre = rotation.apply(box.center)
         if np.all(np.isfinite(centre)):
-            self._box = BBox.from_center(centre[0], centre[1], self._box.w_px, self._box.h_px)
+            self._box = BBox.from_center(centre[0], centre[1], box.w_px, box.h_px)
 
     def _depth_known(self, prediction: PixelPrediction) -> bool:
         """Whether the prediction's depth is positive and known to coast_scale_max_relative_sigma (False
@@ -159,13 +169,13 @@ class GuidedTracker:
         """While lost, scale the DCF and output boxes from their size at the last tracked frame by the ratio
         of that frame's predicted depth to this one's (GuidedTrackerConfig.coast_scale_from_depth), when both
         are known."""
-        then, dcf_then, output_then = self._last_tracked
+        then, dcf_then, output_then = _after_init(self._last_tracked)
         if not (self.config.coast_scale_from_depth and self._depth_known(then) and self._depth_known(prediction)):
             return
         factor = then.depth_m / prediction.depth_m
         box = self.dcf.box
         self.dcf.commit(box.center, factor * dcf_then.w_px / box.w_px)  # the DCF box scales isotropically
-        centre = self._box.center
+        centre = _after_init(self._box).center
         self._box = BBox.from_center(centre[0], centre[1], factor * output_then.w_px, factor * output_then.h_px)
 
     def _best_separating(self, image_rgb: ImageRGB, box: BBox) -> BBox:
@@ -278,7 +288,7 @@ class GuidedTracker:
 
     def _colour_confirms(self, image_rgb: ImageRGB, location_px: FloatArray) -> bool:
         """Whether the target's colour model finds a plausible blob of the target's size at `location_px`."""
-        refinement = self.refiner.refine(image_rgb, location_px, self._box, size_reference=self.dcf.box)
+        refinement = self.refiner.refine(image_rgb, location_px, _after_init(self._box), size_reference=self.dcf.box)
         return refinement is not None and refinement.accepted
 
     def _select(self, image_rgb: ImageRGB, centre_px: FloatArray) -> tuple[PeakChoice, float]:
@@ -304,10 +314,11 @@ class GuidedTracker:
         centre = dcf_box.center
         if not self.config.box_refinement:
             return dcf_box
-        refinement = self.refiner.refine(image_rgb, centre, self._box, size_reference=dcf_box)
+        last = _after_init(self._box)
+        refinement = self.refiner.refine(image_rgb, centre, last, size_reference=dcf_box)
         if refinement is None or not refinement.accepted:
             w_px, h_px = (self._measured_size(prediction) if self.config.size_refused_box_by_depth
-                          else (self._box.w_px, self._box.h_px))
+                          else (last.w_px, last.h_px))
             return BBox.from_center(centre[0], centre[1], w_px, h_px)
         if learn:
             self.refiner.update(image_rgb, refinement)
@@ -340,9 +351,10 @@ class GuidedTracker:
         (apparent size ~ 1 / depth) when both are known, else the last output box's size. A box measured before
         the first 3D fix is given the first known depth as its own here (the DSST scale is no substitute for the
         depth: it drifts on a turning target)."""
-        box, depth_m = self._measured
+        box, depth_m = _after_init(self._measured)
         if not self._depth_known(prediction):
-            return self._box.w_px, self._box.h_px
+            last = _after_init(self._box)
+            return last.w_px, last.h_px
         if math.isnan(depth_m):
             self._measured = (box, prediction.depth_m)
             return box.w_px, box.h_px
@@ -351,7 +363,7 @@ class GuidedTracker:
 
     def _coast_box(self, image_rgb: ImageRGB, predicted_px: FloatArray) -> BBox:
         """While lost, the box follows the trajectory prediction with its last size."""
-        last = self._box
+        last = _after_init(self._box)
         if not _inside(predicted_px, image_rgb):
             return last
         return BBox.from_center(predicted_px[0], predicted_px[1], last.w_px, last.h_px)

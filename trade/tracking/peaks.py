@@ -123,7 +123,7 @@ def parabola_vertex_offset(values: npt.ArrayLike, index: int) -> float:
 def refine_peak(scores: npt.ArrayLike, cell_rc: npt.ArrayLike) -> FloatArray:
     """(2,) fractional (row, col) of the peak at integer `cell_rc`, by a parabola along each axis."""
     s = np.asarray(scores)  # the parabolas convert their row and column to float64
-    row, col = (int(v) for v in cell_rc)
+    row, col = (int(v) for v in np.asarray(cell_rc).reshape(2))
     return np.array([row + parabola_vertex_offset(s[:, col], row), col + parabola_vertex_offset(s[row, :], col)])
 
 

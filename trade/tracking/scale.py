@@ -55,7 +55,7 @@ class ScaleConfig:
     @property
     def exponents(self) -> FloatArray:
         """(n_scales,) k such that the sample sizes are box size * scale_step ** k."""
-        return np.arange(self.n_scales) - (self.n_scales - 1) / 2
+        return np.arange(self.n_scales, dtype=np.float64) - (self.n_scales - 1) / 2
 
 
 def spectral_power(spectrum: npt.NDArray[np.complex64], subscripts: str) -> npt.NDArray[np.float32]:

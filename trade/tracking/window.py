@@ -6,6 +6,7 @@ Owns the window geometry (pixel centres at integer coordinates, OpenCV), border 
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import cast
 
 import cv2
 import numpy as np
@@ -39,7 +40,8 @@ def _shrunk_roi(
     hi = np.maximum(hi, lo + 1)
     roi = image[lo[1] : hi[1], lo[0] : hi[0]]
     small = np.maximum(np.round((hi - lo) / shrink), 1).astype(int)
-    src = cv2.resize(roi, (int(small[0]), int(small[1])), interpolation=cv2.INTER_AREA)
+    # cv2.resize keeps the dtype (its stubs say only "an integer or float array")
+    src = cast(ImageRGB, cv2.resize(roi, (int(small[0]), int(small[1])), interpolation=cv2.INTER_AREA))
     # resize maps dst pixel i to roi coordinate (i + 1/2) s - 1/2 with s = roi size / dst size
     step = (hi - lo) / small
     return src, lo + 0.5 * step - 0.5, step
@@ -82,7 +84,8 @@ def sample_windows(
 @lru_cache(maxsize=8)
 def _gaussian_kernel(sigma_px: float) -> npt.NDArray[np.float64]:
     """(k, 1) Gaussian kernel of `sigma_px`, cut at _BLUR_TRUNCATE_SIGMAS (read-only)."""
-    kernel = cv2.getGaussianKernel(2 * int(np.ceil(_BLUR_TRUNCATE_SIGMAS * sigma_px)) + 1, sigma_px)
+    # float64: getGaussianKernel's default ktype is CV_64F
+    kernel = cast(FloatArray, cv2.getGaussianKernel(2 * int(np.ceil(_BLUR_TRUNCATE_SIGMAS * sigma_px)) + 1, sigma_px))
     kernel.setflags(write=False)
     return kernel
 

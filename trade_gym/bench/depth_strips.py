@@ -22,6 +22,7 @@ from trade_gym import metrics
 from trade_gym.bench.failures import depth_cause
 from trade_gym.bench.runner import RunResult, error_line, fly
 from trade_gym.bench.suites import RunSpec
+from trade_gym.env import TradeFollowEnv
 
 STRIP_FRAMES = 4  # frames per strip, spread over the frames whose ground estimate is off
 CAPTION_HEIGHT_PX = 34  # two lines of text under each frame
@@ -70,8 +71,11 @@ def write_strip(spec: RunSpec, path: Path) -> Path:
     planes: list[str] = []
 
     def grab(env: gym.Env, obs: dict, info: dict) -> None:
-        frames.append(env.render())
-        plane = env.unwrapped.estimate.ground.plane
+        base, image = env.unwrapped, env.render()
+        if not isinstance(base, TradeFollowEnv) or not isinstance(image, np.ndarray):  # as `fly` builds it
+            raise TypeError(f"write_strip needs a TradeFollow-v0 env rendering rgb_array, got {type(base).__name__}")
+        frames.append(image)
+        plane = base.estimate.ground.plane
         planes.append("no plane" if plane is None else f"plane tilt {plane.tilt_deg:.0f} deg, {plane.n_inliers} inl")
 
     infos, _ = fly(spec, on_frame=grab, render=True)

@@ -45,7 +45,11 @@ class Executor(Protocol):
     """Runs specs and returns their results in spec order, calling `on_done` as each run finishes."""
 
     backend: str  # one of BACKENDS, recorded in results.json meta
-    address: str | None  # the Ray address; None for the local backend
+
+    @property
+    def address(self) -> str | None:
+        """The Ray address; None for the local backend (read-only here, so an executor may narrow its type)."""
+        ...
 
     def workers(self) -> int:
         """How many runs execute at once."""
@@ -93,10 +97,11 @@ class _Ledger:
         return False
 
     def results(self) -> list[RunResult]:
-        missing = [self.specs[i].run_id for i, r in enumerate(self._results) if r is None]
-        if missing:
+        done = [r for r in self._results if r is not None]
+        if len(done) < len(self._results):
+            missing = [self.specs[i].run_id for i, r in enumerate(self._results) if r is None]
             raise RuntimeError(f"runs without a result: {', '.join(missing)}")
-        return list(self._results)  # type: ignore[arg-type]  (checked above)
+        return done
 
 
 class LocalExecutor:
@@ -138,17 +143,20 @@ class LocalExecutor:
                 for slot in (s for s in range(n_slots) if s not in busy):
                     if not queue:
                         break
-                    if pools[slot] is None:
-                        pools[slot] = ProcessPoolExecutor(max_workers=1, mp_context=context)
+                    pool = pools[slot]
+                    if pool is None:
+                        pool = pools[slot] = ProcessPoolExecutor(max_workers=1, mp_context=context)
                     index = queue.popleft()
-                    running[pools[slot].submit(self.task, ledger.specs[index])] = (slot, index)
+                    running[pool.submit(self.task, ledger.specs[index])] = (slot, index)
                 finished, _ = wait(running, return_when=FIRST_COMPLETED)
                 for future in finished:
                     slot, index = running.pop(future)
                     try:
                         result = future.result()
                     except BrokenProcessPool as exc:  # this slot's only worker died running this run
-                        pools[slot].shutdown(wait=True)
+                        broken = pools[slot]
+                        if broken is not None:  # it is: the run was submitted to it
+                            broken.shutdown(wait=True)
                         pools[slot] = None
                         if ledger.worker_died(index, error_line(exc)):
                             queue.appendleft(index)

@@ -26,12 +26,12 @@ PLANE_BELOW = "depth too long: plane below the ground"
 PLANE_UNSTABLE = "depth noisy: plane unstable"
 
 
-def _value(metrics: Mapping[str, object], name: str) -> float:
+def _value(metrics: Mapping[str, float | int | bool | None], name: str) -> float:
     value = metrics.get(name)
-    return math.nan if value is None else float(value)  # type: ignore[arg-type]
+    return math.nan if value is None else float(value)
 
 
-def tracking_cause(metrics: Mapping[str, object]) -> str | None:
+def tracking_cause(metrics: Mapping[str, float | int | bool | None]) -> str | None:
     """Why the track failed (None when it did not)."""
     tracked = _value(metrics, "tracked_fraction")
     if not tracked < FAIL_TRACKED_FRACTION:  # NaN (the target never visible) is no tracking failure
@@ -41,7 +41,7 @@ def tracking_cause(metrics: Mapping[str, object]) -> str | None:
     return ON_DECOY if _value(metrics, "decoy_switches") > 0 else LOST_TRACK
 
 
-def depth_cause(metrics: Mapping[str, object]) -> str | None:
+def depth_cause(metrics: Mapping[str, float | int | bool | None]) -> str | None:
     """Why the ground depth failed (None when it did not)."""
     rmse = _value(metrics, "ground_depth_rmse_m")
     if math.isnan(rmse):
@@ -54,7 +54,7 @@ def depth_cause(metrics: Mapping[str, object]) -> str | None:
     return PLANE_BELOW if bias > BIAS_FRACTION_OF_RMSE * rmse else PLANE_UNSTABLE
 
 
-def failure_cause(metrics: Mapping[str, object], scores_ground_depth: bool = True) -> str | None:
+def failure_cause(metrics: Mapping[str, float | int | bool | None], scores_ground_depth: bool = True) -> str | None:
     """'; '-joined causes of a failed run, None for a run that passed. `scores_ground_depth`: whether the
     run's perception estimates ground depth at all (the oracle does not)."""
     causes = [tracking_cause(metrics), depth_cause(metrics) if scores_ground_depth else None]

@@ -11,7 +11,7 @@ from typing import Any
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M
 from trade_gym.bench.report import MISSING, fmt, pooled_mean, table
 from trade_gym.bench.runner import RunResult
-from trade_gym.bench.summary import metric_stats, pooled_rmse, summarise
+from trade_gym.bench.summary import metric_stats, metric_values, pooled_rmse, summarise
 
 Record = dict[str, Any]
 # The paper's Table 1, full TRADE: pooled ground-depth RMSE [m] with (ground-truth, VIO) pose per scene.
@@ -65,8 +65,8 @@ def _depth_row(runs: Sequence[RunResult]) -> list[str]:
     """Pooled ground-depth RMSE, per-flight median, worst flight and how many flights exceed the failure
     threshold, over `runs` (the failed ones left out)."""
     ok = [r for r in runs if r.error is None]
-    rmses = [float(r.metrics["ground_depth_rmse_m"]) for r in ok]
-    pooled = pooled_rmse(rmses, [int(r.metrics["ground_depth_frames"]) for r in ok])
+    rmses = metric_values(ok, "ground_depth_rmse_m")
+    pooled = pooled_rmse(rmses, metric_values(ok, "ground_depth_frames"))
     scored = [(rmse, r) for rmse, r in zip(rmses, ok) if math.isfinite(rmse)]
     worst_m, worst = max(scored, key=lambda pair: pair[0], default=(math.nan, None))
     worst_text = f"{fmt(worst_m)} (world {worst.spec.seed}, {worst.spec.policy})" if worst else MISSING

@@ -15,9 +15,9 @@ import numpy as np  # noqa: E402
 import numpy.typing as npt  # noqa: E402
 
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M, FAIL_TRACKED_FRACTION  # noqa: E402
-from trade_gym.bench.runner import RunResult  # noqa: E402
+from trade_gym.bench.runner import RunResult, RunSeries  # noqa: E402
 from trade_gym.bench.suites import RunSpec  # noqa: E402
-from trade_gym.bench.summary import config_label, spec_record  # noqa: E402
+from trade_gym.bench.summary import config_label, metric_values, spec_record  # noqa: E402
 from trade_gym.config import CAMERA_RATE_HZ  # noqa: E402
 
 TERRAIN_MARGIN_M = 5.0  # terrain shown around the paths [m]
@@ -27,7 +27,7 @@ DPI = 110
 LEGEND_FONT_SIZE = 7
 
 
-def nanmean_ragged(series: Sequence[npt.ArrayLike]) -> npt.NDArray[np.float64]:
+def nanmean_ragged(series: Sequence[npt.NDArray[np.float64]]) -> npt.NDArray[np.float64]:
     """Per-frame mean over runs of different lengths, ignoring NaN: (max T,) with NaN where no run has
     a value."""
     length = max((len(s) for s in series), default=0)
@@ -37,6 +37,13 @@ def nanmean_ragged(series: Sequence[npt.ArrayLike]) -> npt.NDArray[np.float64]:
     counts = np.sum(np.isfinite(stack), axis=0)
     sums = np.nansum(stack, axis=0)
     return np.divide(sums, counts, out=np.full(length, np.nan), where=counts > 0)
+
+
+def _series(run: RunResult) -> RunSeries:
+    """The run's per-frame series; `_by_scene_and_config` keeps only the runs that have one."""
+    if run.series is None:
+        raise ValueError(f"run {run.spec.run_id} has no per-frame series")
+    return run.series
 
 
 def _by_scene_and_config(results: Sequence[RunResult]) -> dict[str, dict[str, list[RunResult]]]:
@@ -91,12 +98,12 @@ def plot_paths(results: Sequence[RunResult], title: str, path: Path) -> Path | N
     fig, axes = _panels(len(grouped))
     for ax, (scene, configs) in zip(axes, grouped.items()):
         first_runs = [runs[0] for runs in configs.values()]
-        longest = max(first_runs, key=lambda r: len(r.series.target_xy_m))
-        target = longest.series.target_xy_m
-        _draw_terrain(ax, longest.spec, np.vstack([target] + [r.series.drone_xy_m for r in first_runs]))
+        longest = max(first_runs, key=lambda r: len(_series(r).target_xy_m))
+        target = _series(longest).target_xy_m
+        _draw_terrain(ax, longest.spec, np.vstack([target] + [_series(r).drone_xy_m for r in first_runs]))
         ax.plot(target[:, 0], target[:, 1], "k-", lw=2.0, label="target")
         for label, run in zip(configs, first_runs):
-            xy = run.series.drone_xy_m
+            xy = _series(run).drone_xy_m
             short = label.split("/", 1)[1] if "/" in label else label  # the group name is in the title
             line, = ax.plot(xy[:, 0], xy[:, 1], lw=1.0, label=short.replace("/", " "))
             if len(xy):
@@ -153,7 +160,7 @@ def plot_strip(results: Sequence[RunResult], title: str, path: Path) -> Path | N
     offsets = np.random.default_rng(0)  # a fixed jitter: the same results draw the same figure
     for ax, (name, label, threshold, log) in zip(axes[0], STRIP_METRICS):
         for k, runs in enumerate(categories.values()):
-            values = np.array([float(r.metrics[name]) for r in runs], dtype=np.float64)
+            values = np.array(metric_values(runs, name), dtype=np.float64)
             values = np.maximum(values, MIN_LOG_RMSE_M) if log else values
             x = k + offsets.uniform(-STRIP_JITTER, STRIP_JITTER, len(values))
             ax.plot(x, values, "o", ms=4, alpha=0.7, color=f"C{k % 10}")
@@ -189,7 +196,7 @@ def plot_latency(results: Sequence[RunResult], title: str, path: Path) -> Path |
     for ax, (name, label) in zip(axes[0], LATENCY_METRICS):
         for (scene, policy), by_latency in curves.items():
             latencies = sorted(by_latency)
-            values = [np.array([float(r.metrics[name]) for r in by_latency[v]], dtype=np.float64) for v in latencies]
+            values = [np.array(metric_values(by_latency[v], name), dtype=np.float64) for v in latencies]
             mean = [float(np.mean(v[np.isfinite(v)])) if np.isfinite(v).any() else np.nan for v in values]
             std = [float(np.std(v[np.isfinite(v)], ddof=1)) if np.isfinite(v).sum() > 1 else 0.0 for v in values]
             ax.errorbar(latencies, mean, yerr=std, marker="o", ms=3, lw=1.0, capsize=2,

@@ -184,11 +184,9 @@ class ReferenceCheck:
                 f"{count} problem{'' if count == 1 else 's'}")
 
 
-def _run_problem(result: RunResult, entry: dict[str, Any] | None) -> str | None:
+def _run_problem(result: RunResult, entry: dict[str, Any]) -> str | None:
     """Why `result` cannot be compared with its reference entry, or None."""
     spec = result.spec
-    if entry is None:
-        return f"{spec.run_id}: not in the reference"
     if (entry["steps_requested"], entry["camera_size"]) != (spec.steps, spec.camera_size):
         return (f"{spec.run_id}: {spec.steps} steps at {spec.camera_size} px, reference "
                 f"{entry['steps_requested']} steps at {entry['camera_size']} px")
@@ -206,6 +204,9 @@ def check_against_reference(results: Sequence[RunResult], reference: dict[str, A
     problems, compared = [], 0
     for result in results:
         entry = runs.get(result.spec.run_id)
+        if entry is None:
+            problems.append(f"{result.spec.run_id}: not in the reference")
+            continue
         if (problem := _run_problem(result, entry)) is not None:
             problems.append(problem)
             continue

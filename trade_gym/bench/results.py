@@ -20,7 +20,7 @@ import numpy as np
 
 from trade_gym.bench.runner import RunResult, RunSeries, RunTiming
 from trade_gym.bench.suites import RunSpec
-from trade_gym.bench.summary import spec_record
+from trade_gym.bench.summary import metric_values, spec_record
 from trade_gym.metrics import METRIC_NAMES
 from trade_gym.provenance import cpu_model, git_commit  # noqa: F401  (git_commit: re-exported)
 
@@ -82,7 +82,7 @@ def build_document(results: Sequence[RunResult], summary: list[dict[str, Any]], 
     """The results.json document. `runs[*].metrics` and `summary` are deterministic; timing lives only
     in `runs[*].timing`, `meta` and `timing`."""
     ok = [r for r in results if r.error is None]
-    steps = sum(int(r.metrics["steps"]) for r in ok)
+    steps = int(sum(metric_values(ok, "steps")))
     loop_s = sum(r.timing.step_loop_s for r in ok)
     return {
         "schema_version": SCHEMA_VERSION,

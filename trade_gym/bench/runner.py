@@ -65,7 +65,7 @@ class RunTiming:
 @dataclass(frozen=True)
 class RunResult:
     spec: RunSpec
-    metrics: dict[str, float | int | bool]  # `trade_gym.metrics.episode_metrics`; empty on error
+    metrics: dict[str, float | int | bool | None]  # `trade_gym.metrics.episode_metrics`; empty on error
     timing: RunTiming
     series: RunSeries | None
     error: str | None = None  # one line: the exception that ended the run
@@ -114,7 +114,8 @@ def fly(spec: RunSpec, on_frame: FrameHook | None = None,
     `record_root/<run id>/episode_0000/`."""
     start = time.perf_counter()
     kwargs = spec.env_kwargs() | ({"render_mode": "rgb_array"} if render else {})
-    base = env = TradeFollowEnv(**kwargs)
+    base = TradeFollowEnv(**kwargs)
+    env: gym.Env = base  # wrapped by the recorder when recording
     loop_start: list[float] = []  # when the reset returned
 
     def reset_done(flown: gym.Env, obs: dict, info: dict) -> None:

@@ -44,7 +44,7 @@ def wilson_interval(rate: float, n: int, z: float = CONFIDENCE_Z) -> tuple[float
     return max(0.0, centre - half), min(1.0, centre + half)
 
 
-def pooled_rmse(rmses: Sequence[float], frames: Sequence[int]) -> float:
+def pooled_rmse(rmses: Sequence[float], frames: Sequence[float]) -> float:
     """RMSE over the union of the runs' frames: sqrt(sum_i rmse_i^2 n_i / sum_i n_i)."""
     r, n = np.asarray(rmses, dtype=np.float64), np.asarray(frames, dtype=np.float64)
     ok = np.isfinite(r) & (n > 0)
@@ -63,6 +63,12 @@ def _number(value: Any) -> float:
     return math.nan if value is None else float(value)
 
 
+def metric_values(runs: Sequence[RunResult], name: str) -> list[float]:
+    """Metric `name` of each run as a float: counts and flags as numbers, NaN where undefined (None: `success`
+    without a following rate) or absent."""
+    return [_number(r.metrics.get(name)) for r in runs]
+
+
 def summarise(results: Sequence[RunResult]) -> list[dict[str, Any]]:
     """One record per configuration, in first-appearance order."""
     by_config: dict[str, list[RunResult]] = {}
@@ -72,12 +78,12 @@ def summarise(results: Sequence[RunResult]) -> list[dict[str, Any]]:
     for runs in by_config.values():
         ok = [r for r in runs if r.error is None]
         record = spec_record(runs[0].spec) | {"n_runs": len(runs), "n_failed": len(runs) - len(ok)}
-        record["metrics"] = {name: metric_stats([_number(r.metrics.get(name)) for r in ok]) for name in METRIC_NAMES}
+        record["metrics"] = {name: metric_stats(metric_values(ok, name)) for name in METRIC_NAMES}
         for kind in DEPTH_KINDS:
-            record[f"pooled_{kind}_depth_rmse_m"] = pooled_rmse(
-                [r.metrics[f"{kind}_depth_rmse_m"] for r in ok], [r.metrics[f"{kind}_depth_frames"] for r in ok])
-            record[f"pooled_{kind}_depth_frames"] = int(sum(r.metrics[f"{kind}_depth_frames"] for r in ok))
-        record["decoy_switches_total"] = int(sum(r.metrics["decoy_switches"] for r in ok))
+            frames = metric_values(ok, f"{kind}_depth_frames")
+            record[f"pooled_{kind}_depth_rmse_m"] = pooled_rmse(metric_values(ok, f"{kind}_depth_rmse_m"), frames)
+            record[f"pooled_{kind}_depth_frames"] = int(sum(frames))
+        record["decoy_switches_total"] = int(sum(metric_values(ok, "decoy_switches")))
         record["crashes"] = int(sum(bool(r.metrics["crashed"]) for r in ok))
         scores_ground = runs[0].spec.perception != "oracle" and runs[0].spec.depth_kind == "ground"
         causes = [(r.spec.seed, failure_cause(r.metrics, scores_ground)) for r in ok]

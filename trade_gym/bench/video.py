@@ -15,6 +15,7 @@ from trade_gym.bench.dashboard import Dashboard
 from trade_gym.bench.runner import fly
 from trade_gym.bench.suites import RunSpec
 from trade_gym.config import CAMERA_RATE_HZ
+from trade_gym.env import TradeFollowEnv
 
 MP4_FOURCC = "mp4v"
 VIDEO_PANEL_PX = 512  # onboard view and top view side; the video is twice as wide
@@ -32,10 +33,12 @@ def record_video(spec: RunSpec, out_stem: Path) -> Path:
     board: list[Dashboard] = []
 
     def grab(env: gym.Env, obs: dict, info: dict) -> None:
-        base = env.unwrapped
+        base, image = env.unwrapped, env.render()
+        if not isinstance(base, TradeFollowEnv) or not isinstance(image, np.ndarray):  # as `fly` builds it
+            raise TypeError(f"record_video needs a TradeFollow-v0 env rendering rgb_array, got {type(base).__name__}")
         if not board:  # the reset: the world exists now
             board.append(Dashboard(base.world, VIDEO_PANEL_PX, spec.steps * base.config.frame_dt_s))
-        frames.append(board[0].frame(env.render(), info, base.estimate.position_world_m))
+        frames.append(board[0].frame(image, info, base.estimate.position_world_m))
 
     fly(dataclasses.replace(spec, camera_size=max(spec.camera_size, VIDEO_PANEL_PX)), on_frame=grab, render=True)
     return write_video(frames, out_stem)
@@ -59,7 +62,7 @@ def _write_mp4(path: Path, frames: list[np.ndarray], rate_hz: float) -> bool:
     if not frames:
         return False
     h, w = frames[0].shape[:2]
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*MP4_FOURCC), float(rate_hz), (w, h))
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*MP4_FOURCC), float(rate_hz), (w, h))
     if not writer.isOpened():
         return False
     try:

@@ -11,8 +11,10 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from trade.geometry import CameraIntrinsics
+from trade.geometry import CameraIntrinsics, Pose
+from trade.ground_filter import DepthPredictor
 from trade.pipeline import Estimate, PipelineConfig, TradePipeline
+from trade.roi_features import RoiFeatures
 from trade.single_image_depth import SingleImageDepth
 from trade.tracking.guided_config import GuidedTrackerConfig
 from trade.types import BBox
@@ -56,10 +58,11 @@ class TradePerception:
         self.intrinsics = intrinsics
         # The shipped single-image depth model, loaded (and its SHA-256 checked) once per env.
         needs_model = self.pipeline_config.ground_mask or self.pipeline_config.single_image_depth
-        self.depth_model = SingleImageDepth() if needs_model else None
+        # (a `SensorFaults` wrapper may swap in a faulty one)
+        self.depth_model: DepthPredictor | None = SingleImageDepth() if needs_model else None
         self.pipeline: TradePipeline | None = None
         self.last: Estimate | None = None  # the pipeline's estimate at the last tracked frame
-        self._T_world_cam = None  # that frame's camera pose (the overlay draws from it)
+        self._T_world_cam: Pose | None = None  # that frame's camera pose (the overlay draws from it)
         self.rng_seed: int | None = None  # the seed of the stack's own generator this episode
 
     def reset(self, sensors: SensorFrame, init_box: FloatArray, rng: np.random.Generator) -> PerceptionOutput:
@@ -82,6 +85,8 @@ class TradePerception:
 
     def step(self, sensors: SensorFrame) -> PerceptionOutput:
         """The pipeline's estimate of this frame; a frame its guards refuse coasts (no fresh box)."""
+        if self.pipeline is None:
+            raise RuntimeError("TradePerception.step() before reset()")
         est = self.pipeline.step(sensors.rgb, sensors.T_world_cam, sensors.t_s, finite_imu(sensors.imu))
         if est.coast_reason is None:
             self.last, self._T_world_cam = est, sensors.T_world_cam
@@ -89,7 +94,7 @@ class TradePerception:
 
     @property
     def overlay(self) -> TradeOverlay | None:
-        if self.last is None or self._T_world_cam is None:
+        if self.last is None or self._T_world_cam is None or self.pipeline is None:  # set together by reset
             return None
         return TradeOverlay(self.last, self.intrinsics, self._T_world_cam, self.pipeline.ground_mask)
 
@@ -121,20 +126,20 @@ class TradeOverlay:
             tinted = image[self.ground_mask].astype(np.float32)
             image[self.ground_mask] = (tinted + GROUND_TINT_WEIGHT * (GROUND_TINT_RGB - tinted)).astype(np.uint8)
         if est.roi is not None and len(est.roi.pixels):
-            self._draw_features(image)
+            self._draw_features(image, est.roi)
         if len(est.trajectory_preview_world_m):
             uv = self.K.project(self.T_world_cam.inverse().apply(est.trajectory_preview_world_m))
             uv = uv[np.all(np.isfinite(uv), axis=1)]
             if len(uv) >= 2:
                 cv2.polylines(image, [np.round(uv).astype(np.int32)], False, TRAJECTORY_COLOUR_RGB, 1)
 
-    def _draw_features(self, image: npt.NDArray[np.uint8]) -> None:
-        roi, plane = self.est.roi, self.est.plane
+    def _draw_features(self, image: npt.NDArray[np.uint8], roi: RoiFeatures) -> None:
+        plane = self.est.plane
         lo, hi = FEATURE_DEPTH_RANGE_M
         depth = np.nan_to_num(roi.depth_m, nan=hi)
         level = np.clip((depth - lo) / (hi - lo) * 255.0, 0, 255).astype(np.uint8)
         colours = cv2.applyColorMap(level.reshape(-1, 1), cv2.COLORMAP_JET).reshape(-1, 3)[:, ::-1]
-        inlier = np.zeros(len(roi.pixels), bool)
+        inlier = np.zeros(len(roi.pixels), np.bool_)
         if plane is not None:
             finite = np.all(np.isfinite(roi.points_world), axis=1) & roi.promoted
             inlier[finite] = np.abs(plane.signed_distance(roi.points_world[finite])) <= PLANE_INLIER_DRAW_M

@@ -23,7 +23,7 @@ from trade_gym.perception.base import SensorFrame
 from trade_gym.perception.trade_stack import STACK_SWITCHES, TradePerception, pipeline_config
 from trade_gym.recording.format import (META_FILE, FrameTruth, SequenceError, current_setting_names, encode_box,
                                         encode_real, json_safe)
-from trade_gym.recording.reader import Sequence, SequenceFrame
+from trade_gym.recording.reader import Sequence
 from trade_gym.scoring import ScoredEstimate, estimate_scores, ground_depth_along, horizontal_distance_m, score_estimate
 
 FloatArray = npt.NDArray[np.float64]
@@ -59,7 +59,9 @@ class ReplaySettings:
 
     def env_config(self) -> EnvConfig:
         """The env configuration whose stack this is (ValueError naming a bad switch combination)."""
-        return EnvConfig(perception=self.perception, **dict(self.switches))
+        # the ignore: mypy matches the unpacked dict of bools against every field; its names are bool switches
+        # (STACK_SWITCHES, checked in __post_init__)
+        return EnvConfig(perception=self.perception, **dict(self.switches))  # type: ignore[arg-type]
 
     def as_json(self) -> dict[str, Any]:
         config = self.env_config()
@@ -72,7 +74,8 @@ def recorded_settings(sequence: Sequence, perception: str | None = None,
     """The sequence's recorded stack (meta.json `perception`: mode, switches, seed; the defaults when it has
     none), with `perception` and `overrides` replacing what they name."""
     recorded = sequence.meta.get("perception") or {}
-    mode = perception or (recorded.get("mode") if recorded.get("mode") in REPLAY_PERCEPTIONS else "trade")
+    recorded_mode = recorded.get("mode")
+    mode = perception or (recorded_mode if recorded_mode in REPLAY_PERCEPTIONS else "trade")
     switches = {n: v for n, v in (recorded.get("switches") or {}).items() if n in STACK_SWITCHES}
     switches.update(dict(overrides))
     seed = recorded.get("rng_seed")
@@ -140,8 +143,8 @@ def replay(sequence: Sequence, settings: ReplaySettings, video: bool = False) ->
                   else ground_depth_along(out.ground, out.bbox, sensors.T_world_cam, sequence.intrinsics))
         estimates.append(FrameEstimate(frame.index, frame.t_s, out.bbox, bool(out.valid), float(out.target_depth_m),
                                        float(ground), out.ground.plane))
-        if scored and frame.index > 0:
-            infos.append(_info(frame, truth, held, threshold))
+        if scored and frame.index > 0 and frame.truth is not None:  # scored: every frame has its truth
+            infos.append(_info(frame.t_s, frame.truth, truth, held, threshold))
         if video and rgb is not None:
             from trade_gym.annotate import annotate_frame
 
@@ -180,13 +183,13 @@ def _ground_truth(truth: FrameTruth | None) -> GroundTruth:
                        np.full(2, np.nan), truth.ground_depth_m)
 
 
-def _info(frame: SequenceFrame, truth: GroundTruth, held: ScoredEstimate, threshold: float) -> dict[str, Any]:
-    """The per-frame record `trade_gym.metrics` scores, as the env's `info` computes it (`truth`: the frame's
-    recorded truth as the env's)."""
-    recorded = frame.truth
+def _info(t_s: float, recorded: FrameTruth, truth: GroundTruth, held: ScoredEstimate,
+          threshold: float) -> dict[str, Any]:
+    """The per-frame record `trade_gym.metrics` scores, as the env's `info` computes it, for the frame at `t_s` [s]
+    with the `recorded` truth (`truth`: the same as the env's)."""
     drone, target = recorded.drone_position_world_m, recorded.target_position_world_m
     info = {
-        "t_s": recorded.t_s if math.isfinite(recorded.t_s) else frame.t_s,  # the true time, as the env's info
+        "t_s": recorded.t_s if math.isfinite(recorded.t_s) else t_s,  # the true time, as the env's info
         **estimate_scores(truth, held, threshold, recorded.decoy_bboxes_in_view()),
         "crashed": recorded.crashed,
         "drone_position_m": drone,

@@ -8,17 +8,21 @@ from __future__ import annotations
 
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 import numpy as np
 
 from trade_gym.config import CAMERA_RATE_HZ
 from trade_gym.faults import SensorFaults
+from trade_gym.ground_truth import GroundTruth
 from trade_gym.provenance import git_commit
 from trade_gym.recording.format import FrameRecord, FrameTruth, VehicleTruth, json_safe
 from trade_gym.recording.writer import (DEFAULT_PNG_COMPRESSION, SequenceMeta, SequenceWriter, check_png_compression,
                                         instance_lookup, instance_map)
+
+if TYPE_CHECKING:
+    from trade_gym.env import TradeFollowEnv
 
 EPISODE_DIR = "episode_{k:04d}"
 GENERATOR = "trade_gym.recording.RecordSequence"
@@ -56,11 +60,11 @@ class RecordSequence(gym.Wrapper):
         if path.exists():  # checked before the env moves, so nothing is half done
             raise FileExistsError(f"{path}: a sequence folder is there already; record into another root")
         obs, info = self.env.reset(seed=seed, options=options)
-        self._writer = SequenceWriter(path, self._meta(seed), self.png_compression)
+        writer = self._writer = SequenceWriter(path, self._meta(seed), self.png_compression)
         self.episodes_started += 1
-        base = self.env.unwrapped
-        self._instances = instance_lookup([base.world.target.body_id, *(d.body_id for d in base.world.decoys)])
-        self._write_or_discard(info)
+        world = self._base.world
+        self._instances = instance_lookup([world.target.body_id, *(d.body_id for d in world.decoys)])
+        self._write_or_discard(writer, info)
         return obs, info
 
     def step(self, action):
@@ -70,7 +74,7 @@ class RecordSequence(gym.Wrapper):
             self.discard()
             raise
         if self._writer is not None:
-            self._write_or_discard(info)
+            self._write_or_discard(self._writer, info)
             if terminated or truncated:
                 self._finish()
         return obs, reward, terminated, truncated, info
@@ -86,38 +90,44 @@ class RecordSequence(gym.Wrapper):
         super().close()
 
     # --------------------------------------------------------------- internals
+    @property
+    def _base(self) -> TradeFollowEnv:
+        """The TradeFollow-v0 env under the wrappers (`__init__` checked it has the recorder's properties)."""
+        return cast("TradeFollowEnv", self.env.unwrapped)
+
     def _finish(self) -> None:
         if self._writer is not None:
             writer, self._writer = self._writer, None
             self.written.append(writer.close())
 
-    def _write_or_discard(self, info: dict[str, Any]) -> None:
+    def _write_or_discard(self, writer: SequenceWriter, info: dict[str, Any]) -> None:
         try:
-            self._write(info)
+            self._write(writer, info)
         except BaseException:
             self.discard()
             raise
 
-    def _write(self, info: dict[str, Any]) -> None:
-        base = self.env.unwrapped
-        sensors, frame = base.delivered_sensors, base.camera_frame
-        self._writer.add(FrameRecord(
+    def _write(self, writer: SequenceWriter, info: dict[str, Any]) -> None:
+        base, instances = self._base, self._instances
+        sensors, frame, truth = base.delivered_sensors, base.camera_frame, base.ground_truth
+        if sensors is None or truth is None or instances is None:
+            raise RuntimeError("RecordSequence: no frame to write before the env's reset")
+        writer.add(FrameRecord(
             t_s=sensors.t_s,
             rgb=sensors.rgb,
             T_world_cam=sensors.T_world_cam,
             T_world_cam_true=base.true_camera_pose,
             imu=sensors.imu,
-            truth=self._truth(info),
+            truth=self._truth(info, truth),
             depth_m=frame.depth_m if self.record_depth and frame is not None else None,
-            seg=instance_map(frame.seg, self._instances) if self.record_seg and frame is not None else None,
+            seg=instance_map(frame.seg, instances) if self.record_seg and frame is not None else None,
             faults=tuple(info.get("faults", ())),
         ))
 
-    def _truth(self, info: dict[str, Any]) -> FrameTruth:
-        """The frame's ground truth; the visible fraction from `info`, where a fault wrapper lowers it for what
-        the delivered image shows."""
-        base = self.env.unwrapped
-        truth, world = base.ground_truth, base.world
+    def _truth(self, info: dict[str, Any], truth: GroundTruth) -> FrameTruth:
+        """The frame's ground `truth` as recorded; the visible fraction from `info`, where a fault wrapper lowers it
+        for what the delivered image shows."""
+        world = self._base.world
         vehicles = [VehicleTruth(1, world.target.kind, "target", truth.target_bbox)]
         vehicles += [VehicleTruth(i + 2, d.kind, "decoy", box) for i, (d, box) in
                      enumerate(zip(world.decoys, truth.decoy_bboxes))]
@@ -136,7 +146,7 @@ class RecordSequence(gym.Wrapper):
         )
 
     def _meta(self, seed: int | None) -> SequenceMeta:
-        base = self.env.unwrapped
+        base = self._base
         config = base.config
         if self._commit is None:
             self._commit = git_commit()

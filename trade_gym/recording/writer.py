@@ -242,7 +242,8 @@ class SequenceWriter:
 
     def _write_depth(self, k: int, depth_m: np.ndarray) -> str:
         relative, path = self._file(DEPTH_DIR, k, DEPTH_SUFFIX)
-        np.savez(path, **{DEPTH_ARRAY: np.asarray(depth_m, dtype=np.float32)})
+        # the ignore: numpy's stub matches the unpacked name against savez's allow_pickle: bool as well
+        np.savez(path, **{DEPTH_ARRAY: np.asarray(depth_m, dtype=np.float32)})  # type: ignore[arg-type]
         self._layers["depth"] = {"dir": DEPTH_DIR, "encoding": "npz", "array": DEPTH_ARRAY, "dtype": "float32",
                                  "quantity": "camera-frame z", "unit": "m", "no_hit_m": self.meta.depth_no_hit_m}
         return relative
@@ -260,8 +261,8 @@ class SequenceWriter:
 
 def check_png_compression(level: object) -> None:
     """ValueError unless `level` is an integer PNG compression level in [0, MAX_PNG_COMPRESSION]."""
-    require(is_int_at_least(level, 0, numpy_ints=False) and level <= MAX_PNG_COMPRESSION, "png_compression", level,
-            f"an integer in [0, {MAX_PNG_COMPRESSION}]")
+    ok = is_int_at_least(level, 0, numpy_ints=False) and level <= MAX_PNG_COMPRESSION
+    require(bool(ok), "png_compression", level, f"an integer in [0, {MAX_PNG_COMPRESSION}]")
 
 
 def instance_lookup(body_ids: list[int]) -> np.ndarray:

@@ -106,8 +106,8 @@ def draw_appearance(rng: np.random.Generator, spec: SceneSpec) -> Appearance:
     contrast = float(rng.choice(GROUND_CONTRASTS))
     detail, turns = int(rng.choice(GROUND_DETAILS)), int(rng.choice(GROUND_QUARTER_TURNS))
     hue_shift_deg = 360.0 / VEHICLE_HUE_STEPS * int(rng.integers(0, VEHICLE_HUE_STEPS))
-    vehicle_tint = _floats(rng.uniform(*VEHICLE_TINT_RANGE, 3))
-    return Appearance(lighting, contrast, detail, turns, _floats(ground_tint / ground_tint.max()), hue_shift_deg,
+    vehicle_tint = _float3(rng.uniform(*VEHICLE_TINT_RANGE, 3))
+    return Appearance(lighting, contrast, detail, turns, _float3(ground_tint / ground_tint.max()), hue_shift_deg,
                       vehicle_tint, _draw_camera(rng, spec.follow_altitude_agl_m))
 
 
@@ -118,7 +118,7 @@ def _draw_lighting(rng: np.random.Generator) -> Lighting:
     warmth = rng.uniform(-1.0, 1.0)  # > 0 towards WARM_LIGHT_RGB, < 0 towards COOL_LIGHT_RGB, from white
     end = np.asarray(WARM_LIGHT_RGB if warmth > 0 else COOL_LIGHT_RGB)
     colour = 1.0 + abs(warmth) * (end - 1.0)
-    return Lighting(direction, _floats(colour), float(rng.uniform(*LIGHT_AMBIENT_RANGE)),
+    return Lighting(direction, _float3(colour), float(rng.uniform(*LIGHT_AMBIENT_RANGE)),
                     float(rng.uniform(*LIGHT_DIFFUSE_RANGE)), float(rng.uniform(*LIGHT_SPECULAR_RANGE)))
 
 
@@ -128,14 +128,15 @@ def _draw_camera(rng: np.random.Generator, follow_height_m: float) -> CameraLook
     near, far = (np.asarray(end) for end in HAZE_RGB_ENDS)
     haze = near + rng.uniform() * (far - near)
     exposure = math.exp(rng.uniform(*np.log(EXPOSURE_RANGE_S)))
-    return CameraLook(extinction, _floats(haze), exposure, float(rng.uniform(*GAIN_RANGE_EV)),
+    return CameraLook(extinction, _float3(haze), exposure, float(rng.uniform(*GAIN_RANGE_EV)),
                       float(rng.uniform(*READ_NOISE_RANGE_DN)), float(rng.uniform(*SHOT_NOISE_RANGE_DN)),
                       float(rng.uniform(*VIGNETTING_RANGE)),
                       int(rng.integers(JPEG_QUALITY_RANGE[0], JPEG_QUALITY_RANGE[1] + 1)))
 
 
-def _floats(values) -> tuple[float, ...]:
-    return tuple(float(v) for v in values)
+def _float3(values: np.ndarray) -> tuple[float, float, float]:
+    x, y, z = (float(v) for v in values)
+    return x, y, z
 
 
 def apply_to_world(world: World, appearance: Appearance) -> None:
@@ -185,7 +186,7 @@ class EpisodeLook:
         smears it over the exposure. Depth and segmentation are the renderer's either way."""
         cfg = self.camera.config
         self.world.prepare_render(T_world_cam, self.camera.intrinsics, cfg.near_m, cfg.far_m)
-        if self.appearance is None:
+        if self.appearance is None or self._effects is None:  # both None, or neither
             return self.camera.render(T_world_cam)
         frame = self.camera.render(T_world_cam, self.appearance.lighting)
         velocity_cam = T_world_cam.R.T @ state.velocity_mps

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import cv2
 import numpy as np
@@ -97,7 +98,8 @@ class CameraEffects:
         if not length >= MIN_MOTION_BLUR_PX:
             return image
         kernel = line_kernel(length, smear / np.hypot(*smear))
-        return cv2.filter2D(image, -1, kernel, borderType=cv2.BORDER_REFLECT)
+        # ddepth -1 keeps float32 (OpenCV's stubs say only "an integer or float array")
+        return cast(npt.NDArray[np.float32], cv2.filter2D(image, -1, kernel, borderType=cv2.BORDER_REFLECT))
 
 
 def line_kernel(length_px: float, direction: FloatArray) -> npt.NDArray[np.float32]:
@@ -120,4 +122,7 @@ def jpeg_round_trip(rgb: npt.NDArray[np.uint8], quality: int) -> npt.NDArray[np.
     ok, encoded = cv2.imencode(".jpg", np.ascontiguousarray(rgb[:, :, ::-1]), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
     if not ok:
         raise RuntimeError(f"JPEG encoding failed at quality {quality!r}")
-    return np.ascontiguousarray(cv2.imdecode(encoded, cv2.IMREAD_COLOR)[:, :, ::-1])
+    decoded = cv2.imdecode(encoded, cv2.IMREAD_COLOR)
+    if decoded is None:
+        raise RuntimeError(f"JPEG decoding failed at quality {quality!r}")
+    return cast(npt.NDArray[np.uint8], np.ascontiguousarray(decoded[:, :, ::-1]))  # IMREAD_COLOR: 8-bit BGR

@@ -81,13 +81,13 @@ class ViewCuller:
     def set_colour(self, rgba: npt.ArrayLike) -> None:
         """Give every managed body the colour `rgba` (4,), applied now to those shown, on showing to the rest."""
         self._rgba[:] = np.asarray(rgba, dtype=np.float64).reshape(4)
-        for i in np.flatnonzero(self.shown):
+        for i in np.flatnonzero(self.shown).tolist():
             self._apply(i, self._rgba[i])
 
     def update(self, T_world_cam: Pose, K: CameraIntrinsics, near_m: float, far_m: float) -> int:
         """Show the bodies that can be in view of this camera, hide the rest; returns how many are shown."""
         want = corners_in_view(self._corners_m, T_world_cam, K, near_m, far_m)
-        for i in np.flatnonzero(want != self.shown):
+        for i in np.flatnonzero(want != self.shown).tolist():
             self._apply(i, self._rgba[i] if want[i] else (*self._rgba[i, :3], 0.0))
         self.shown = want
         return int(want.sum())

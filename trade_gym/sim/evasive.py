@@ -124,7 +124,7 @@ def lateral_bounds(layout: SceneLayout, half_extents_m: FloatArray, top_speed_mp
     offset up to which every offset across is clear, sampled every EVASIVE_BOUND_ALONG_M; for a target of
     half_extents_m (3,) [m] driving at most top_speed_mps [m/s] and turning at most swerve_rad off its path."""
     m, along = layout.target, EVASIVE_BOUND_ALONG_M
-    s = np.append(np.arange(m.start_s_m, m.end_s_m, along), m.end_s_m)
+    s = np.append(np.arange(m.start_s_m, m.stop_s_m, along), m.stop_s_m)
     xy, normal = m.path.position_m(s), left_normal(m.path.tangent(s))
     half_x, half_y = float(half_extents_m[0]), float(half_extents_m[1])
     widest = EVASIVE_OFFROAD_LATERAL_M if layout.road is None else max(layout.road.half_width_m - half_y, 0.0)
@@ -220,12 +220,12 @@ class EvasiveMotion:
         self._alert = math.hypot(drone[0] - x, drone[1] - y) < self.radius_m
 
     def _s_m(self, t_s: float) -> float:
-        s = self.base.distance_m(t_s) + self._extra_m
-        return s if s < self.base.end_s_m else self.base.end_s_m
+        s, end = self.base.distance_m(t_s) + self._extra_m, self.base.stop_s_m
+        return s if s < end else end
 
     def _driving(self, t_s: float, s_m: float) -> bool:
         base = self.base
-        return base.is_moving and t_s >= base.delay_s and s_m < base.end_s_m
+        return base.is_moving and t_s >= base.delay_s and s_m < base.stop_s_m
 
     def _tangent_rate(self, s_m: float) -> tuple[float, float, float, float]:
         """The unit tangent t(s) and its derivative t'(s) [1/m] (central difference); n'(s) = (-t'_y, t'_x)."""
@@ -286,7 +286,7 @@ class EvasiveMotion:
         if t_s != self._t_s:
             base, dt = self.base, t_s - self._t_s
             right, left = self.bounds.here(s)
-            s = min(max(s + s_rate * dt, base.start_s_m), base.end_s_m)
+            s = min(max(s + s_rate * dt, base.start_s_m), base.stop_s_m)
             d = min(max(d + d_rate * dt, -right), left)
         return s, d, s_rate, d_rate
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -101,6 +102,19 @@ class Imu:
         sigma0 = np.repeat([cfg.accel_initial_bias_sigma_mps2, cfg.gyro_initial_bias_sigma_radps], 3)
         self._bias = sigma0 * rng.standard_normal(_N_AXES) if cfg.noise else np.zeros(_N_AXES)
 
+    def prime_at_rest(self, R_world_body: FloatArray, gravity_mps2: float, frame_rate_hz: float,
+                      rng: np.random.Generator) -> None:
+        """Run the IMU before the episode starts (`reset` with `rng`): the first `read` carries the samples of one
+        frame period at `frame_rate_hz` (rounded up to whole IMU periods) taken at rest in attitude `R_world_body`
+        (3, 3), so it holds a real, seeded reading (gravity on the body axes plus noise and bias) instead of zeros."""
+        rate_hz = self.config.rate_hz
+        lead_s = math.ceil(rate_hz / frame_rate_hz) / rate_hz
+        self.reset(-lead_s, rng)
+        rest_force_body = R_world_body.T @ np.array([0.0, 0.0, gravity_mps2])
+        still = np.zeros(3)
+        self.add_truth(-lead_s, rest_force_body, still)
+        self.add_truth(0.0, rest_force_body, still)
+
     @property
     def accel_bias_mps2(self) -> FloatArray:
         """(3,) current accelerometer bias [m/s^2] (after the last delivered sample)."""
@@ -111,7 +125,8 @@ class Imu:
         """(3,) current gyro bias [rad/s] (after the last delivered sample)."""
         return self._bias[3:].copy()
 
-    def add_truth(self, t_s: float, specific_force_body: npt.ArrayLike, gyro_body: npt.ArrayLike) -> None:
+    def add_truth(self, t_s: float, specific_force_body: Sequence[float] | FloatArray,
+                  gyro_body: Sequence[float] | FloatArray) -> None:
         """Store truth at `t_s` [s]: specific force (3,) body [m/s^2], angular rate (3,) body [rad/s]."""
         f, w = specific_force_body, gyro_body
         self._truth.append((float(t_s), float(f[0]), float(f[1]), float(f[2]),

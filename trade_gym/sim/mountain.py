@@ -43,10 +43,10 @@ def _road(spec: SceneSpec, rng: np.random.Generator) -> tuple[CatmullRomSpline, 
     d1 = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) @ d0
     leg2 = spec.route_length_m - spec.turn_after_m
     corner = spec.turn_after_m * d0
-    pts = [-ROAD_EXTENSION_M * d0, np.zeros(2), corner / 2, corner]
-    pts += [corner + leg2 * k / (SECOND_LEG_POINTS - 1) * d1 for k in range(1, SECOND_LEG_POINTS)]
-    pts.append(corner + (leg2 + ROAD_EXTENSION_M) * d1)
-    pts = np.array(pts)
+    points = [-ROAD_EXTENSION_M * d0, np.zeros(2), corner / 2, corner]
+    points += [corner + leg2 * k / (SECOND_LEG_POINTS - 1) * d1 for k in range(1, SECOND_LEG_POINTS)]
+    points.append(corner + (leg2 + ROAD_EXTENSION_M) * d1)
+    pts = np.array(points)
     pts -= (pts[1] + pts[-2]) / 2.0  # centre the route on the origin
     road = CatmullRomSpline(pts)
     _, s = road.closest(np.array([pts[1], pts[-2]]))

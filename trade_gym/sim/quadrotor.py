@@ -16,6 +16,11 @@ import pybullet as p
 from trade.validation import is_finite_number, is_positive_number, require
 
 FloatArray = npt.NDArray[np.float64]
+_Vec3 = tuple[float, float, float]
+# pybullet's state as read: velocity (3,), row-major R_world_body (9,), body rates (3,) (`_query_reading`); and
+# position, velocity, angular velocity, R_world_body, body rates, specific force (`_sample`)
+_Read = tuple[tuple[float, ...], tuple[float, ...], _Vec3]
+_Reading = tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, ...], _Vec3, _Vec3]
 
 _BODY_LINK = -1  # pybullet link index of a multibody's base
 _ORIGIN = (0.0, 0.0, 0.0)  # thrust acts at the centre of mass
@@ -117,11 +122,11 @@ class Quadrotor:
         self._yaw_sp = float(yaw_rad)
         self._t_s = 0.0
         self._dt_s = 0.0
-        self._v_pre = (0.0, 0.0, 0.0)
+        self._v_pre: tuple[float, ...] = (0.0, 0.0, 0.0)
         self._m_pre: tuple[float, ...] | None = None  # row-major R_world_body before the last step
         self._gravity_z = 0.0
-        self._last_read: tuple[tuple[float, ...], ...] | None = None  # (v, R, body rates) of read_state()
-        self._reading: tuple[tuple[float, ...], ...] | None = None  # `_sample()` since the last step
+        self._last_read: _Read | None = None  # (v, R, body rates) of read_state()
+        self._reading: _Reading | None = None  # `_sample()` since the last step
 
     def spawn(self, position_m: npt.ArrayLike, yaw_rad: float) -> int:
         """Create the airframe at `position_m` (3,) world [m], level, heading `yaw_rad`; returns its id."""
@@ -178,7 +183,7 @@ class Quadrotor:
         self._reading = None  # the caller steps the simulation next
         self._t_s += float(dt_s)
 
-    def _query_reading(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, float, float]]:
+    def _query_reading(self) -> _Read:
         """(velocity (3,) world [m/s], row-major R_world_body (9,), body rates (3,) [rad/s]) from pybullet."""
         c, b = self.client_id, self.body_id
         _, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
@@ -266,8 +271,7 @@ class Quadrotor:
             ax, ay = ax * s, ay * s
         return ax, ay, fz
 
-    def _sample(self) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, ...],
-                               tuple[float, float, float], tuple[float, float, float]]:
+    def _sample(self) -> _Reading:
         """Raw state after the last step: position, velocity, angular velocity (world), row-major
         R_world_body, body rates R^T w and specific force R_pre^T ((v - v_pre)/dt - g)."""
         if self.body_id is None:

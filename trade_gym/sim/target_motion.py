@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_right
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -49,6 +49,11 @@ class StopAndGoMotion:
     knot_factors: tuple[float, ...]  # >= 0
     stops: tuple[tuple[float, float], ...] = ()
     speed_factors: tuple[float, ...] = ()
+    # derived in __post_init__: each knot's speed-factor slope [1/s], the distance driven by each knot [m] and the
+    # time the route's end is reached [s]
+    _slopes: tuple[float, ...] = field(init=False, repr=False)
+    _driven_m: tuple[float, ...] = field(init=False, repr=False)
+    _stop_time_s: float = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         times, factors = self.knot_times_s, self.knot_factors
@@ -96,7 +101,8 @@ class StopAndGoMotion:
             return base.start_s_m
         k, dt = self._knot(tau)
         s = base.start_s_m + self._driven_m[k] + base.speed_mps * (self.knot_factors[k] + self._slopes[k] * dt / 2) * dt
-        return s if s < base.end_s_m else base.end_s_m
+        end = base.stop_s_m
+        return s if s < end else end
 
     def planar_pose(self, t_s: float) -> PlanarPose:
         return self.path.point_at(self.distance_m(t_s))
@@ -121,7 +127,7 @@ class StopAndGoMotion:
         base = self.base
         if not base.is_moving:
             return 0.0
-        route, driven, v = base.end_s_m - base.start_s_m, self._driven_m, base.speed_mps
+        route, driven, v = base.stop_s_m - base.start_s_m, self._driven_m, base.speed_mps
         k = max(bisect_right(driven, route) - 1, 0)
         if k == len(driven) - 1 and route > driven[k] and self.knot_factors[k] <= 0.0:
             return math.inf  # ends standing short of the route's end
@@ -171,8 +177,9 @@ def draw_stop_and_go(base: VehicleMotion, rng: np.random.Generator) -> StopAndGo
     """A stop-and-go profile over `base`'s route: drives of STOP_GO_DRIVE_S between stops of STOP_GO_STOP_S, each
     drive legs at factors drawn from STOP_GO_SPEED_FACTORS; at t = 0 the target already drives its first leg's speed
     (as cruise drives its own). Drawn until the route is covered."""
-    route_m, first = base.end_s_m - base.start_s_m, float(rng.uniform(*STOP_GO_SPEED_FACTORS))
-    profile, stops, factors = _Profile(first, base.speed_mps), [], []
+    route_m, first_factor = base.stop_s_m - base.start_s_m, float(rng.uniform(*STOP_GO_SPEED_FACTORS))
+    first: float | None = first_factor  # the first drive's first leg's factor; None for the later drives
+    profile, stops, factors = _Profile(first_factor, base.speed_mps), [], []
     while base.is_moving:
         for factor, hold_s in _drive_legs(rng, float(rng.uniform(*STOP_GO_DRIVE_S)), profile.factors[-1], first):
             profile.ramp_to(factor)

@@ -52,17 +52,17 @@ class Heightfield:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.heights_m.shape  # type: ignore[return-value]
+        return self.heights_m.shape
 
     @property
     def x_m(self) -> FloatArray:
         """(nx,) world x of the grid columns [m]."""
-        return self.origin_m[0] + self.spacing_m * np.arange(self.shape[1])
+        return self.origin_m[0] + self.spacing_m * np.arange(self.shape[1], dtype=np.float64)
 
     @property
     def y_m(self) -> FloatArray:
         """(ny,) world y of the grid rows [m]."""
-        return self.origin_m[1] + self.spacing_m * np.arange(self.shape[0])
+        return self.origin_m[1] + self.spacing_m * np.arange(self.shape[0], dtype=np.float64)
 
     @property
     def centre_m(self) -> FloatArray:

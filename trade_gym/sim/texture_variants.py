@@ -10,6 +10,7 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import cast
 
 import cv2
 import numpy as np
@@ -31,7 +32,10 @@ def variant_path(name: str, key: str, make: Callable[[Image], Image]) -> Path:
         _cache = tempfile.TemporaryDirectory(prefix="trade_gym_textures_")
     path = Path(_cache.name) / f"{name}-{key}.png"
     if not path.is_file():
-        rgb = cv2.imread(str(texture_path(name)), cv2.IMREAD_COLOR)[:, :, ::-1]
+        bgr = cv2.imread(str(texture_path(name)), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise OSError(f"could not read texture {texture_path(name)}")
+        rgb = cast(Image, bgr[:, :, ::-1])  # IMREAD_COLOR gives 8-bit BGR
         partial = path.with_name(f"partial-{os.getpid()}-{path.name}")
         if not cv2.imwrite(str(partial), np.ascontiguousarray(make(rgb)[:, :, ::-1])):
             raise OSError(f"could not write texture variant {partial}")
@@ -45,7 +49,7 @@ def ground_variant(rgb: Image, quarter_turns: int, detail: int, contrast: float)
     h, w = rgb.shape[:2]
     out = np.rot90(rgb, quarter_turns)
     if detail > 1:
-        out = cv2.resize(np.tile(out, (detail, detail, 1)), (w, h), interpolation=cv2.INTER_AREA)
+        out = cast(Image, cv2.resize(np.tile(out, (detail, detail, 1)), (w, h), interpolation=cv2.INTER_AREA))
     out = out.astype(np.float64)
     mean = out.mean(axis=(0, 1))
     return np.clip(np.rint(mean + contrast * (out - mean)), 0, 255).astype(np.uint8)

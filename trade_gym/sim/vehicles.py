@@ -113,21 +113,28 @@ class VehicleMotion:
             raise ValueError(f"VehicleMotion.delay_s must be >= 0, got {self.delay_s!r}")
 
     @property
+    def stop_s_m(self) -> float:
+        """Distance along the path where the vehicle stops [m]: end_s_m, or the path's end for None (which
+        __post_init__ has already resolved)."""
+        return self.path.length_m if self.end_s_m is None else self.end_s_m
+
+    @property
     def is_moving(self) -> bool:
-        return self.speed_mps > MOVING_EPS_MPS and self.end_s_m > self.start_s_m
+        return self.speed_mps > MOVING_EPS_MPS and self.stop_s_m > self.start_s_m
 
     @property
     def stop_time_s(self) -> float:
         """Time at which the vehicle reaches end_s and stops [s]."""
         if not self.is_moving:
             return 0.0
-        return self.delay_s + (self.end_s_m - self.start_s_m) / self.speed_mps
+        return self.delay_s + (self.stop_s_m - self.start_s_m) / self.speed_mps
 
     def distance_m(self, t_s: float) -> float:
         """s(t) [m] for a scalar t [s] (conditional expressions: cheaper than builtin min/max calls)."""
         since = t_s - self.delay_s
         s = self.start_s_m + self.speed_mps * since if since > 0.0 else self.start_s_m
-        return float(s) if s < self.end_s_m else self.end_s_m
+        end = self.stop_s_m
+        return float(s) if s < end else end
 
     def planar_velocity_mps(self, t_s: float) -> FloatArray:
         """(2,) world x, y velocity [m/s]; zero before the delay and after the stop."""

@@ -21,7 +21,7 @@ from trade_gym.sim import city, desert, mountain
 from trade_gym.sim.bullet_lists import bullet_list
 from trade_gym.sim.culling import ViewCuller
 from trade_gym.sim.evasive import EvasiveMotion
-from trade_gym.sim.layout import SceneLayout, parked
+from trade_gym.sim.layout import Lake, Road, SceneLayout, parked
 from trade_gym.sim.mesh_files import remove_mesh_files
 from trade_gym.sim.meshes import (
     TEXTURE_PERIOD_M, Mesh, building_meshes, create_terrain_visual, grid_uvs, placed_meshes, polygon_mesh, rock_mesh,
@@ -32,7 +32,9 @@ from trade_gym.sim.scenes import DECOY_TIERS, SceneSpec, get_scene
 from trade_gym.sim.target_motion import TargetMotion, motion_summary
 from trade_gym.sim.terrain import Heightfield
 from trade_gym.sim.vehicle_poses import VehiclePoses
-from trade_gym.sim.vehicles import Vehicle, VehicleMotion, create_vehicle_body, create_vehicle_shape, vehicle_model
+from trade_gym.sim.vehicles import (
+    Motion, Vehicle, VehicleMotion, create_vehicle_body, create_vehicle_shape, vehicle_model,
+)
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -96,7 +98,8 @@ def _terrain_tiles(cid: int, layout: SceneLayout, texture_id: int,
     normals = hf.vertex_normals().reshape(ny, nx, 3)
     drop = layout.lake.normalised_radius(gx, gy) <= 1.0 if layout.lake is not None else None
     base_position = tuple(origin.tolist())
-    bodies, lo, hi = [], [], []
+    bodies: list[int] = []
+    lo, hi = [], []
     for r0, r1 in itertools.pairwise(_tile_edges(ny - 1, tiles_per_side)):
         for c0, c1 in itertools.pairwise(_tile_edges(nx - 1, tiles_per_side)):
             rows, cols = slice(r0, r1 + 1), slice(c0, c1 + 1)
@@ -131,8 +134,7 @@ def _building_bodies(cid: int, layout: SceneLayout, textures: dict[str, int]) ->
             _textured_body(cid, roofs, textures["roof"])]
 
 
-def _road_body(cid: int, layout: SceneLayout, texture_id: int) -> int:
-    road, hf = layout.road, layout.terrain
+def _road_body(cid: int, road: Road, hf: Heightfield, texture_id: int) -> int:
     s, xy = road.path.sample(ROAD_SAMPLE_M)
     normal = road.path.tangent(s) @ np.array([[0.0, 1.0], [-1.0, 0.0]])  # rotate +90 deg: left normal
     sides = np.stack([xy + road.half_width_m * normal, xy - road.half_width_m * normal], 1)  # (K, 2 left/right, 2)
@@ -141,8 +143,8 @@ def _road_body(cid: int, layout: SceneLayout, texture_id: int) -> int:
                           texture_id)
 
 
-def _lake_body(cid: int, layout: SceneLayout) -> int:
-    mesh = polygon_mesh(layout.lake.outline_m(), layout.lake.level_m + LAKE_LIFT_M)
+def _lake_body(cid: int, lake: Lake) -> int:
+    mesh = polygon_mesh(lake.outline_m(), lake.level_m + LAKE_LIFT_M)
     return _static_body(cid, -1, mesh.create_visual_shape(cid, rgba=LAKE_RGBA))
 
 
@@ -298,7 +300,8 @@ def _route_points(layout: SceneLayout) -> FloatArray:
 def _park_away(layout: SceneLayout, far_m: float, rng: np.random.Generator) -> tuple[VehicleMotion, ...]:
     """As many parked decoys as `layout` drew, each farther than `far_m` from the target's route, on the terrain,
     clear of buildings and of each other; a decoy without such a place after PARK_TRIES is dropped."""
-    path, route, spots = layout.target.path, _route_points(layout), []
+    path, route = layout.target.path, _route_points(layout)
+    spots: list[FloatArray] = []
     edge = layout.spec.terrain_size_m / 2.0 - PARK_EDGE_MARGIN_M
     lo, hi = layout.buildings_lo_m[:, :2] - PARK_BUILDING_MARGIN_M, layout.buildings_hi_m[:, :2] + PARK_BUILDING_MARGIN_M
     for _ in layout.decoys:
@@ -339,17 +342,18 @@ def build_world(client_id: int, scene: str, rng: np.random.Generator, target_spe
         "terrain": terrain_tiles,
         "boulders": (_boulder_body(client_id, layout, tex["rock"]),) if layout.boulders else (),
         "buildings": tuple(_building_bodies(client_id, layout, tex)),
-        "road": (_road_body(client_id, layout, tex["dirt_road"]),) if layout.road is not None else (),
-        "lake": (_lake_body(client_id, layout),) if layout.lake is not None else (),
+        "road": (_road_body(client_id, layout.road, layout.terrain, tex["dirt_road"]),) if layout.road is not None
+        else (),
+        "lake": (_lake_body(client_id, layout.lake),) if layout.lake is not None else (),
     }
     shapes = {kind: create_vehicle_shape(client_id, kind) for kind in sorted({spec.target_kind, spec.decoy_kind})}
 
-    def spawn(kind: str, motion: VehicleMotion) -> Vehicle:
+    def spawn(kind: str, motion: Motion) -> Vehicle:
         body = create_vehicle_body(client_id, shapes[kind], tex["vehicle_palette"])
         return Vehicle(kind, body, vehicle_model(kind).half_extents_m, motion)
 
     target_half = vehicle_model(spec.target_kind).half_extents_m
     target = spawn(spec.target_kind, target_motion.build(layout, target_half, rng))
-    decoys = tuple(spawn(spec.decoy_kind, m) for m in layout.decoys)
+    decoy_vehicles = tuple(spawn(spec.decoy_kind, m) for m in layout.decoys)
     remove_mesh_files(client_id)  # an EGL client's OBJ files, read as the bodies were created
-    return World(client_id, layout, target, decoys, roles, culler)
+    return World(client_id, layout, target, decoy_vehicles, roles, culler)
