@@ -22,7 +22,7 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	# the type check of trade/, trade_gym/ and agents/ ([tool.mypy] in pyproject.toml)
-	$(PY) -m mypy
+	$(PY) scripts/typecheck.py
 	$(PY) -m pytest -q -p no:cacheprovider
 	# the regression guard: every quick-suite run must reproduce trade_gym/bench/quick_reference.json (~1-3 min)
 	$(VENV)/bin/trade-bench --suite quick --out $(CHECK_OUT) --check-reference

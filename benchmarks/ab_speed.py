@@ -11,21 +11,20 @@ Usage: git worktree add /tmp/base <commit>; python benchmarks/ab_speed.py --base
 from __future__ import annotations
 
 import argparse
-import atexit
 import functools
 import json
 import os
 import platform
-import shutil
 import statistics
 import subprocess
 import sys
-import tempfile
-import tomllib
 from datetime import datetime, timezone
 from pathlib import Path
 
 from trade_gym.provenance import git_commit
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+from install_layout import import_root  # noqa: E402  (scripts/install_layout.py: one definition for both folders)
 
 HERE = Path(__file__).resolve().parents[1]
 
@@ -57,27 +56,6 @@ print(json.dumps({"cpu_steps_per_s": steps / cpu, "wall_steps_per_s": steps / wa
 
 
 @functools.cache
-def import_root(tree: Path) -> Path:
-    """A folder from which `tree`'s code imports as an install of it would: a probe's PYTHONPATH and working folder.
-
-    It links to the tree's top-level entries, but rebuilds trade_gym/ from links with the tree's agents/ and assets/
-    inside, as trade_gym.agents and trade_gym.assets: from a bare tree on PYTHONPATH those two would come from this
-    Python's editable install (its import hook maps them), not from the tree. A tree from before that mapping
-    (pyproject.toml without package-dir) keeps agents/ and assets/ at the top as well, where its own code imports them.
-    """
-    setuptools = tomllib.loads((tree / "pyproject.toml").read_text()).get("tool", {}).get("setuptools", {})
-    mapped = set(setuptools.get("package-dir", {}).values())  # {"agents", "assets"} since the mapping
-    root = Path(tempfile.mkdtemp(prefix="import_root_"))
-    atexit.register(shutil.rmtree, root, ignore_errors=True)  # removes the links, never what they point to
-    for entry in tree.iterdir():
-        if entry.name != "trade_gym" and entry.name not in mapped:
-            (root / entry.name).symlink_to(entry)
-    (root / "trade_gym").mkdir()
-    for entry in [*(tree / "trade_gym").iterdir(), tree / "agents", tree / "assets"]:
-        (root / "trade_gym" / entry.name).symlink_to(entry)
-    return root
-
-
 def probe_env(tree: Path) -> dict[str, str]:
     """The environment of a probe process that runs `tree`'s code (run it with cwd=import_root(tree))."""
     return dict(os.environ, PYTHONPATH=str(import_root(tree)))
