@@ -19,7 +19,7 @@ from trade_gym.bench import results as results_module
 from trade_gym.bench.plots import nanmean_ragged
 from trade_gym.bench.policies import (POLICY_NAMES, HoverPolicy, available_policies, learned_unavailable_reason,
                                       make_policy)
-from trade_gym.bench.report import render_markdown, table1_pivot, tracking_pivot
+from trade_gym.bench.report import follow_pivot, render_markdown, table1_pivot, tracking_pivot
 from trade_gym.bench.results import deterministic_part, load_schema, to_json_safe
 from trade_gym.bench.suites import GROUP_KINDS, SUITES, RunSpec, Selection, expand_suite
 from trade_gym.bench.summary import metric_stats, pooled_rmse, summarise
@@ -458,3 +458,22 @@ def test_breadth_suite_document_is_schema_valid():
     meta = results_module.collect_meta("breadth", ["--suite", "breadth"], 2, len(results), 1.0)
     doc = to_json_safe(results_module.build_document(results, summarise(results), meta, [], None))
     jsonschema.validate(doc, load_schema())
+
+
+def _follow_record(policy: str, tracked: float, success: dict) -> dict:
+    stats = lambda v: {"mean": v, "std": float("nan"), "n": 1}  # noqa: E731
+    return {"scene": "mountain", "policy": policy, "perception": "oracle", "pose_source": "gt", "switches": {},
+            "n_runs": 1, "n_failed": 0, "crashes": 0,
+            "metrics": {"mean_horizontal_error_m": stats(0.5), "following_rate": stats(0.95),
+                        "visible_fraction": stats(1.0), "tracked_fraction": stats(tracked), "success": success}}
+
+
+def test_follow_pivot_scores_what_the_follower_controls_and_no_box_overlap():
+    rows = follow_pivot([_follow_record("scripted", 0.83, {"mean": 1.0, "std": float("nan"), "n": 1}),
+                         _follow_record("random", 0.983, {"mean": float("nan"), "std": float("nan"), "n": 0})])
+    assert rows[2] == ("| scene | follower | horizontal distance [m] | in follow band | target in view | success | "
+                       "crashes |")
+    assert rows[4] == "| mountain | scripted (oracle) | 0.5 | 0.95 | 1 | 1/1 | 0/1 |"
+    assert rows[5] == "| mountain | random (oracle) | 0.5 | 0.95 | 1 | – | 0/1 |"  # success undefined (old results)
+    assert "tracked" not in "\n".join(rows[2:]) and "0.83" not in "\n".join(rows)
+

@@ -127,22 +127,37 @@ def tracking_pivot(records: Sequence[Record]) -> list[str]:
     return table(header, rows)
 
 
+FOLLOW_CAPTION = ("What the follower controls: the mean horizontal distance it kept to the target (0 = straight above "
+                  "it), the fraction of frames in the following band and with the target in view, and its runs that "
+                  "succeeded and crashed. How well the estimated box overlaps the target is perception's score: it is "
+                  "in the tracking tables and in each group's details in results.md.")
+
+
+def _of_runs(count: float, runs: int) -> str:
+    """'count/runs' ('–' without runs)."""
+    return f"{round(count)}/{runs}" if runs else MISSING
+
+
 def follow_pivot(records: Sequence[Record]) -> list[str]:
-    """Per follower (perception, and pose when the group has several): horizontal following error, visible and
-    tracked fraction per scene."""
-    scenes = _scenes(records)
+    """Per scene and follower (perception, and pose when the group has several), what the follower controls: mean
+    horizontal distance to the target [m], following rate (frames in the band), target-in-view fraction (mean ±
+    std over runs), successes and crashes of its runs; no box-overlap score, which only perception moves."""
     configs = list(dict.fromkeys((r["policy"], r["perception"], r["pose_source"]) for r in records))
     several_poses = len({pose for _, _, pose in configs}) > 1
     rows = []
-    for policy, perception, pose in configs:
-        row = [f"{policy} ({perception}{', ' + pose if several_poses else ''})"]
-        for scene in scenes:
+    for scene in _scenes(records):
+        for policy, perception, pose in configs:
             r = _find(records, scene=scene, policy=policy, perception=perception, pose_source=pose)
-            m = r["metrics"] if r else None
-            row.append(f"{mean_pm(m['mean_horizontal_error_m'], 2)} / {mean_pm(m['visible_fraction'])} / "
-                       f"{mean_pm(m['tracked_fraction'])}" if m else MISSING)
-        rows.append(row)
-    return table(["follower"] + [f"{s}: error [m] / visible / tracked" for s in scenes], rows)
+            if r is None:
+                continue
+            m, success = r["metrics"], r["metrics"]["success"]
+            rows.append([scene, f"{policy} ({perception}{', ' + pose if several_poses else ''})",
+                         mean_pm(m["mean_horizontal_error_m"], 2), mean_pm(m["following_rate"]),
+                         mean_pm(m["visible_fraction"]), _of_runs(success["mean"] * success["n"], success["n"]),
+                         _of_runs(r["crashes"], r["n_runs"] - r["n_failed"])])
+    header = ["scene", "follower", "horizontal distance [m]", "in follow band", "target in view", "success",
+              "crashes"]
+    return [FOLLOW_CAPTION, ""] + table(header, rows)
 
 
 def unseen_pivot(records: Sequence[Record]) -> list[str]:
