@@ -19,8 +19,9 @@ from trade_gym.bench import results as results_module
 from trade_gym.bench.plots import nanmean_ragged
 from trade_gym.bench.policies import (POLICY_NAMES, HoverPolicy, available_policies, learned_unavailable_reason,
                                       make_policy)
-from trade_gym.bench.report import follow_pivot, render_markdown, table1_pivot, tracking_pivot
-from trade_gym.bench.results import deterministic_part, load_schema, to_json_safe
+from trade_gym.bench.report import follow_pivot, machine, render_markdown, table1_pivot, tracking_pivot
+from trade_gym.bench.results import (deterministic_part, load_schema, to_json_safe, vector_isa,
+                                     widest_numpy_target)
 from trade_gym.bench.suites import GROUP_KINDS, SUITES, RunSpec, Selection, expand_suite
 from trade_gym.bench.summary import metric_stats, pooled_rmse, summarise
 from trade_gym.config import PERCEPTION_MODES, POSE_SOURCES, SCENE_NAMES
@@ -194,6 +195,7 @@ def test_cli_tiny_oracle_run_writes_schema_valid_outputs_with_timing_apart(tmp_p
     jsonschema.validate(doc, load_schema())
     assert len(doc["runs"]) == 4 and all(r["metrics"]["steps"] == 20 for r in doc["runs"])
     assert doc["meta"]["jobs"] == 1 and doc["meta"]["renderer"] == "TinyRenderer"
+    assert doc["meta"]["cpu_vector_isa"] and set(doc["meta"]["simd_dispatch"]) == {"numpy", "opencv"}
     assert all(r["timing"]["steps_per_s"] > 0 for r in doc["runs"])
     assert all(set(r["metrics"]) == set(METRIC_NAMES) for r in doc["runs"])  # scores only, no timing
     comparable = json.dumps(deterministic_part(doc))
@@ -215,12 +217,14 @@ def test_cli_tiny_oracle_run_writes_schema_valid_outputs_with_timing_apart(tmp_p
     old = json.loads((tmp_path / "a" / "results.json").read_text())
     for run in old["runs"]:
         run["metrics"] = {k: v for k, v in run["metrics"].items() if k not in SCORECARD_KEYS}
+    del old["meta"]["cpu_vector_isa"], old["meta"]["simd_dispatch"]  # written before the ISA was recorded
     (tmp_path / "old").mkdir()
     (tmp_path / "old" / "results.json").write_text(json.dumps(old))
     assert cli.main(["--report", str(tmp_path / "old"), "--out", str(tmp_path / "c")]) == 0
     rendered = json.loads((tmp_path / "c" / "results.json").read_text())
     assert all(r["metrics"][k] is None for r in rendered["runs"] for k in SCORECARD_KEYS)
     assert "Scorecard" not in (tmp_path / "c" / "results.md").read_text()
+    assert f"{old['meta']['cpu']} ({old['meta']['cores']} cores), renderer" in (tmp_path / "c" / "results.md").read_text()
 
 
 SCORECARD_KEYS = ("success", "following_rate", "collision_rate", "nre", "dre", "adq")
@@ -477,3 +481,25 @@ def test_follow_pivot_scores_what_the_follower_controls_and_no_box_overlap():
     assert rows[5] == "| mountain | random (oracle) | 0.5 | 0.95 | 1 | – | 0/1 |"  # success undefined (old results)
     assert "tracked" not in "\n".join(rows[2:]) and "0.83" not in "\n".join(rows)
 
+
+@pytest.mark.parametrize("flags, isa", [
+    (["fpu", "sse4_2", "avx", "avx2", "avx512f", "avx512bw", "avx512vl"], "AVX-512: avx512f avx512bw avx512vl"),
+    (["sse4_1", "sse4_2", "avx", "avx2", "fma"], "AVX2"), (["sse4_2", "avx"], "AVX"), (["sse4_1", "sse4_2"], "SSE4.2"),
+    (["fp", "asimd", "sve"], "SVE"), (["fp", "asimd"], "NEON"), (["sse2"], "unknown"), ([], "unknown")])
+def test_vector_isa_names_the_widest_and_the_avx512_flags(flags, isa):
+    assert vector_isa(flags) == isa
+
+
+def test_widest_numpy_target_is_the_widest_current_target_of_any_loop():
+    info = {"add": {"dd": {"current": "X86_V4", "available": "X86_V4 X86_V3 baseline(SSE SSE2)"}},
+            "abs": {"ff": {"current": "X86_V3", "available": "X86_V3 baseline(SSE SSE2)"}},
+            "cos": {"ff": {"current": "baseline(SSE SSE2)", "available": "baseline(SSE SSE2)"}}}
+    assert widest_numpy_target(info) == "X86_V4"
+    assert widest_numpy_target({"cos": info["cos"]}) == "baseline(SSE SSE2)" and widest_numpy_target({}) == "unknown"
+
+
+def test_report_header_names_the_cpu_its_vector_isa_and_simd_paths_and_old_meta_still_renders():
+    meta = {"cpu": "AMD EPYC", "cores": 2}
+    assert machine(meta) == "AMD EPYC (2 cores)"
+    meta |= {"cpu_vector_isa": "AVX2", "simd_dispatch": {"numpy": "X86_V3", "opencv": "AVX2"}}
+    assert machine(meta) == "AMD EPYC (2 cores, AVX2; numpy X86_V3, opencv AVX2)"

@@ -277,11 +277,19 @@ PIVOTS = {"table1": table1_pivot, "table2": table2_pivot, "tracking": tracking_p
           "unseen": unseen_pivot, "latency": latency_pivot, "breadth": breadth_pivot}
 
 
+def machine(meta: Record) -> str:
+    """'CPU (cores, vector ISA; the SIMD paths numpy and OpenCV take)'; results.json written before the ISA was
+    recorded give 'CPU (cores)'."""
+    isa = f", {meta['cpu_vector_isa']}" if "cpu_vector_isa" in meta else ""
+    paths = ", ".join(f"{lib} {path}" for lib, path in meta.get("simd_dispatch", {}).items())
+    return f"{meta['cpu']} ({meta['cores']} cores{isa}{'; ' + paths if paths else ''})"
+
+
 def render_markdown(summary: Sequence[Record], meta: Record, titles: dict[str, str], failures: Sequence[str],
                     plots: Sequence[str]) -> str:
     """The whole results.md."""
     lines = [f"# trade-bench results{' — suite ' + meta['suite'] if meta.get('suite') else ''}", "",
-             f"commit `{meta['commit']}`, {meta['date_utc']}, {meta['cpu']} ({meta['cores']} cores), "
+             f"commit `{meta['commit']}`, {meta['date_utc']}, {machine(meta)}, "
              f"renderer {meta['renderer']}, {meta['runs']} runs in {meta['wall_s']:.0f} s with {meta['jobs']} jobs.",
              "", "Means ± sample std over seeds; depth RMSE pooled over all frames of all runs; "
              "[n] after a depth RMSE: the frames it pools; tracking scores over frames with the target visible "

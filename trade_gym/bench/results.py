@@ -1,5 +1,6 @@
 """results.json: per-run metrics, trajectory hashes and timing, the per-configuration summary and the run's meta
-(commit, date, CPU, package versions, renderer, backend), with NaN written as null; its JSON schema ships here.
+(commit, date, CPU and its vector ISA, package versions, renderer, backend), with NaN written as null; its JSON
+schema ships here.
 """
 
 from __future__ import annotations
@@ -9,9 +10,11 @@ import json
 import math
 import os
 import platform
+import re
 from collections.abc import Sequence
 from dataclasses import asdict, fields
 from datetime import datetime, timezone
+from functools import cache
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -43,6 +46,73 @@ def package_versions() -> dict[str, str]:
     return versions
 
 
+CPUINFO = Path("/proc/cpuinfo")
+# The widest vector ISA first: its name and the cpuinfo flag that marks it (x86 "flags", Arm "Features").
+VECTOR_ISAS = (("AVX-512", "avx512f"), ("AVX2", "avx2"), ("AVX", "avx"), ("SSE4.2", "sse4_2"), ("SVE2", "sve2"),
+               ("SVE", "sve"), ("NEON", "asimd"))
+UNKNOWN = "unknown"
+NUMPY_TARGET = re.compile(r"baseline\([^)]*\)|\S+")  # one target in opt_func_info's "available" (widest first)
+
+
+def vector_isa(flags: Sequence[str]) -> str:
+    """The widest vector ISA among a CPU's flags, AVX-512 with its avx512 flags ('AVX-512: avx512f avx512bw');
+    'unknown' when none is known."""
+    for name, flag in VECTOR_ISAS:
+        if flag in flags:
+            return f"{name}: {' '.join(f for f in flags if f.startswith('avx512'))}" if flag == "avx512f" else name
+    return UNKNOWN
+
+
+def cpu_flags() -> list[str]:
+    """The first processor's flags from /proc/cpuinfo (empty elsewhere or when unreadable)."""
+    try:
+        lines = CPUINFO.read_text().splitlines()
+    except OSError:
+        return []
+    return next((line.split(":", 1)[1].split() for line in lines if line.split(":")[0].strip() in
+                 ("flags", "Features")), [])
+
+
+def widest_numpy_target(info: dict[str, dict[str, dict[str, str]]]) -> str:
+    """The widest SIMD target numpy runs any loop on, from `numpy.lib.introspect.opt_func_info()`: the loops'
+    current targets, one of them wider than another where some loop lists both as available (widest first)."""
+    currents = {loop["current"] for loops in info.values() for loop in loops.values()}
+    orders = [NUMPY_TARGET.findall(loop["available"]) for loops in info.values() for loop in loops.values()]
+    narrower = {t for order in orders for i, t in enumerate(order) if currents & set(order[:i])}
+    return next(iter(sorted(currents - narrower)), UNKNOWN)
+
+
+def _numpy_simd() -> str:
+    try:
+        from numpy.lib.introspect import opt_func_info  # numpy >= 2.0
+    except ImportError:
+        return UNKNOWN
+    return widest_numpy_target(opt_func_info())
+
+
+def _opencv_simd() -> str:
+    """OpenCV's widest dispatched feature this CPU has: the last '*' (dispatched) name of getCPUFeaturesLine without
+    '?' (not available here)."""
+    try:
+        import cv2
+    except ImportError:
+        return UNKNOWN
+    usable = [f[1:] for f in cv2.getCPUFeaturesLine().split() if f.startswith("*") and not f.endswith("?")]
+    return usable[-1] if usable else UNKNOWN
+
+
+@cache
+def _simd() -> tuple[str, str, str]:
+    return vector_isa(cpu_flags()), _numpy_simd(), _opencv_simd()
+
+
+def simd_meta() -> dict[str, Any]:
+    """The CPU's widest vector ISA and the SIMD path numpy and OpenCV dispatch to on it (read once per process).
+    onnxruntime chooses its kernels inside its C++ library, with no Python view of the choice."""
+    isa, numpy_path, opencv_path = _simd()
+    return {"cpu_vector_isa": isa, "simd_dispatch": {"numpy": numpy_path, "opencv": opencv_path}}
+
+
 def collect_meta(suite: str | None, argv: Sequence[str], jobs: int, n_runs: int, wall_s: float,
                  backend: str = "local", ray_address: str | None = None,
                  renderers: Sequence[str] = ("tiny",)) -> dict[str, Any]:
@@ -55,6 +125,7 @@ def collect_meta(suite: str | None, argv: Sequence[str], jobs: int, n_runs: int,
         "commit": git_commit(Path(__file__).resolve().parent),
         "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "cpu": cpu_model(),
+        **simd_meta(),
         "cores": os.cpu_count() or 0,
         "load_average_1min": round(os.getloadavg()[0], 2),
         "python": platform.python_version(),
