@@ -64,7 +64,8 @@ class GuidedTracker:
         self.dcf = dcf if dcf is not None else DcfTracker(config.dcf)
         self.refiner = refiner if refiner is not None else ColourBoxRefiner(config.colour_box)
         self._box: BBox | None = None  # last output box
-        # last frame-to-frame shift of the tracked box centre (x, y), less the camera's rotation (`step`)
+        # last frame-to-frame shift of the tracked box centre (x, y), less the camera's rotation, of a confident peak
+        # (zero after a weak or ambiguous one: `GuidedTrackerConfig.motion_min_peak_score`)
         self._image_motion_px = np.zeros(2)
         self._tracked_last = True  # whether the previous frame was tracked (its shift is then current)
         # the last tracked frame's prediction, DCF box and output box (the sizes depth scaling starts from)
@@ -113,7 +114,8 @@ class GuidedTracker:
         if tracked:
             previous_px = self.dcf.box.center
             dcf_box = self.dcf.commit(choice.location_px, self._depth_bounded(scale, prediction))
-            self._image_motion_px = dcf_box.center - previous_px
+            confident = not choice.ambiguous and choice.score >= cfg.motion_min_peak_score
+            self._image_motion_px = dcf_box.center - previous_px if confident else np.zeros(2)
             box = self._refine_box(image_rgb, dcf_box, prediction, learn=not choice.ambiguous)
             if not choice.ambiguous:
                 self.dcf.update(image_rgb)  # at the box as the blob bound left it

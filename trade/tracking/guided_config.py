@@ -65,6 +65,13 @@ class GuidedTrackerConfig:
     than half a 2x-box window, while what the rotation leaves of its image motion stayed under 1.5 px (mountain
     development world 116, learned follower). Off, and in the "dcf" baseline, the window starts at the last box, as
     in the paper."""
+    motion_min_peak_score: float = 0.35
+    """A tracked frame's shift is extrapolated into the next frame (the constant-image-velocity window) only when its
+    peak is unambiguous and scores at least this (the confidence of `reacquire_confident_score`); otherwise the next
+    window starts at the box. Under randomised looks (JPEG, sensor noise, haze) the DCF's peaks score 0.15-0.35, and
+    an ambiguous or weak peak's shift, extrapolated, moved the next window, whose nearest candidate then moved the
+    box further: before the first 3D fix the box ran off a target that held still in the image (breadth-tuning
+    worlds, city and mountain). 0 extrapolates every unambiguous tracked frame's shift."""
     second_window_offset_fraction: float = 0.25
     """Search the constant-image-velocity window too when the prediction is offset from it by more than this
     fraction of the search window along either axis (a prediction from a wrong 3D estimate drifts off)."""
@@ -135,6 +142,7 @@ class GuidedTrackerConfig:
             "snap_iterations": (int(self.snap_iterations) == self.snap_iterations >= 0, "an integer >= 0"),
             "reacquire_rings": (int(self.reacquire_rings) == self.reacquire_rings >= 0, "an integer >= 0"),
             "min_peak_score": (math.isfinite(self.min_peak_score), "finite"),
+            "motion_min_peak_score": (math.isfinite(self.motion_min_peak_score), "finite"),
             "reacquire_min_peak_score": (math.isfinite(self.reacquire_min_peak_score), "finite"),
             "reacquire_confident_score": (math.isfinite(self.reacquire_confident_score), "finite"),
             "reacquire_gate_chi2": (self.reacquire_gate_chi2 > 0, "> 0 (inf: no gate)"),  # NaN fails
