@@ -22,11 +22,7 @@ class ScriptedFollowerConfig:
     """Gains [1/s], feed-forward fraction, camera pitch [deg] and the env's action scale."""
 
     position_gain_per_s: float = 0.8
-    # before a 3D estimate exists: speed per half-image offset of the box. A half-image is the footprint's half-width,
-    # 23 m at the desert's follow height (46 / 43 m city / mountain): 18 m/s per half-image is about the position
-    # gain's 0.8/s there, half of it in the city and mountain. A third of it (6) left the drone 6-8 m behind an evasive or
-    # stop-and-go target when its first 3D fix came and left the follow band for 2 s (breadth-tuning worlds)
-    image_gain_mps: float = 18.0
+    image_gain_mps: float = 6.0  # before a 3D estimate exists: speed per half-image offset of the box
     height_gain_per_s: float = 0.6
     velocity_feedforward: float = 1.0
     camera_pitch_deg: float = EnvConfig.camera_pitch_deg  # must match the env's
