@@ -1,5 +1,6 @@
-"""Env speed in one run: oracle steps/s (no rendering), rendering steps/s at 256x256, and the
-pybullet render alone, so the ratios are measured on the same machine at the same moment.
+"""Env speed in one run: oracle steps/s (no rendering), rendering steps/s at 256x256, the pybullet render alone,
+and the full loop (full TRADE perception, the default, at 256x256), so the ratios are measured on the same machine
+at the same moment.
 
 Usage: python benchmarks/speed.py [--steps N] [--scene desert] [--json OUT]
 """
@@ -52,6 +53,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--steps", type=int, default=2000)
     parser.add_argument("--render-steps", type=int, default=100)
+    parser.add_argument("--trade-steps", type=int, default=300, help="steps of the full TRADE loop at 256 px")
     parser.add_argument("--scene", default="desert")
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--policy", choices=("scripted", "hover"), default="scripted")
@@ -59,13 +61,16 @@ def main() -> None:
 
     oracle = TradeFollowEnv(scene=args.scene, perception="oracle", camera_size=256)
     rendering = TradeFollowEnv(scene=args.scene, perception="oracle", camera_size=256, render_mode="rgb_array")
+    trade = TradeFollowEnv(scene=args.scene, perception="trade", camera_size=256)
     try:
         oracle_sps, oracle_cpu_sps, reset_ms = _steps_per_s(oracle, args.steps, seed=0, policy_name=args.policy)
         render_sps, _, _ = _steps_per_s(rendering, args.render_steps, seed=0)
         render_ms = _render_ms(rendering, args.render_steps, seed=0)
+        trade_sps, trade_cpu_sps, _ = _steps_per_s(trade, args.trade_steps, seed=0)
     finally:
         oracle.close()
         rendering.close()
+        trade.close()
     result = {
         "scene": args.scene,
         "policy": args.policy,
@@ -77,6 +82,8 @@ def main() -> None:
         "rendering_step_ms_256": round(1e3 / render_sps, 2),
         "render_share_of_rendering_step": round(render_ms / (1e3 / render_sps), 3),
         "oracle_over_rendering_speed_ratio": round(oracle_sps / render_sps, 1),
+        "trade_steps_per_s_256": round(trade_sps, 2),  # full TRADE perception, the scripted follower, one process
+        "trade_steps_per_cpu_s_256": round(trade_cpu_sps, 2),
         "meta": {
             "commit": git_commit(),
             "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
