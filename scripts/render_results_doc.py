@@ -141,7 +141,7 @@ HEADLINES = (
              "latency", headlines.latency_table, "latency_vs_latency.png", "latency"),
 )
 SPEED_ABOUT = ("Env steps per second in one process, measured by `benchmarks/speed.py` on one machine at one moment: "
-               "with oracle perception and no rendering, and with rendering at 256 px (records "
+               "with oracle perception and no rendering, with rendering at 256 px, and with full TRADE perception at 256 px, the camera's rate being 30 (records "
                "`benchmarks/results/speed_<scene>.json`; how to run it: [benchmark.md](benchmark.md#speed)).")
 
 
