@@ -50,7 +50,7 @@ def _road(spec: SceneSpec, rng: np.random.Generator) -> tuple[CatmullRomSpline, 
     pts -= (pts[1] + pts[-2]) / 2.0  # centre the route on the origin
     road = CatmullRomSpline(pts)
     _, s = road.closest(np.array([pts[1], pts[-2]]))
-    return road, float(s[0]), float(s[1]), -turn
+    return road, float(s[0]), float(s[1]), -float(turn)
 
 
 def _lake(road: CatmullRomSpline, s0: float, side: float, rng: np.random.Generator) -> Lake:

@@ -210,7 +210,7 @@ def distance_to_path(
     src[row[inside], col[inside]] = 0
     dist_cells, labels = cv2.distanceTransformWithLabels(src, cv2.DIST_L2, cv2.DIST_MASK_5,
                                                          labelType=cv2.DIST_LABEL_PIXEL)
-    s_of_label = np.zeros(labels.max() + 1)
+    s_of_label = np.zeros(int(labels.max()) + 1)
     s_of_label[labels[row[inside], col[inside]]] = s_samples[inside]
     dist = dist_cells.astype(np.float64) * grid.spacing_m
     foot = s_of_label[labels]
