@@ -1,7 +1,9 @@
-"""Training of learned followers with stable-baselines3 (PPO or SAC) on the oracle perception mode.
+"""Training of learned followers with stable-baselines3 (PPO or SAC) on the oracle perception mode, optionally
+fine-tuned on the TRADE stack itself.
 
-Owns `TrainConfig`, the vectorised training envs (`trade_gym.agents.training_env`: scene and world seed drawn per
-episode), the PPO warm start and critic warm-up, and `python -m trade_gym.agents.train --out DIR` (settings from
+Owns `TrainConfig`, the vectorised training envs (`trade_gym.agents.training_env`: scene, world seed, target motion,
+decoy tier and appearance drawn per episode; the follower's action shaping inside), the PPO warm start and critic
+warm-up, the perception fine-tune, and `python -m trade_gym.agents.train --out DIR` (settings from
 `agents/hyperparams/<algo>.yml`), which writes the SB3 model, the ONNX policy (`trade_gym.agents.export`) and a JSON
 record of the run (seeds, steps, wall time, hash).
 """
@@ -21,11 +23,15 @@ import numpy as np
 
 from trade_gym.agents.learning_curve import curve_callback
 from trade_gym.agents.obs_flatten import FlatObservation
-from trade_gym.agents.training_env import SceneRandomizedEnv, ZeroYawAction
+from trade_gym.agents.action_shaping import ShapedAction
+from trade_gym.agents.training_env import ScenarioDraws, SceneRandomizedEnv, ZeroYawAction
 from trade_gym.agents.warm_start import WarmStartConfig
 from trade_gym.bench.splits import require_training_worlds
 from trade.validation import check_choice, is_int_at_least, require
 from trade_gym.config import SCENE_NAMES
+from trade_gym.sim.appearance import APPEARANCE_MODES
+from trade_gym.sim.scenes import DECOY_TIERS
+from trade_gym.sim.target_motion import TARGET_MOTIONS
 from trade_gym.perception.oracle import FITTED_FIRST_FIX_DELAY_S
 
 ALGOS = ("ppo", "sac")
@@ -47,6 +53,17 @@ class TrainConfig:
     # extra gym.make kwargs; the oracle's fitted first-fix delay is not EnvConfig's default (see there)
     env_kwargs: tuple[tuple[str, Any], ...] = (("perception", "oracle"),
                                                ("oracle_first_fix_delay_s", FITTED_FIRST_FIX_DELAY_S))
+    # the scenario drawn per episode (`ScenarioDraws`): every target motion, decoy tier and appearance the benchmark
+    # scores (appearance changes only rendered perception, i.e. the fine-tune)
+    target_motions: tuple[str, ...] = TARGET_MOTIONS
+    decoy_tiers: tuple[str, ...] = DECOY_TIERS
+    appearances: tuple[str, ...] = APPEARANCE_MODES
+    # train under `LearnedFollower`'s soft start and acceleration limit (`ShapedAction`), as the policy will fly
+    action_shaping: bool = True
+    # after `total_steps`, PPO/SAC continues `finetune_steps` more steps with `finetune_env_kwargs` on top of
+    # `env_kwargs` (e.g. the TRADE stack itself at a small camera: its losses, which the oracle does not have)
+    finetune_steps: int = 100_000
+    finetune_env_kwargs: tuple[tuple[str, Any], ...] = (("perception", "trade"), ("camera_size", 128))
     hidden_units: tuple[int, ...] = (64, 64)
     learning_rate: float = 1e-4
     n_steps_per_env: int = 4096  # PPO rollout length per env
@@ -102,28 +119,40 @@ class TrainConfig:
                              f"{self.checkpoint_every_steps!r} and {self.verbose!r}")
         require(bool(self.hidden_units) and all(int(h) >= 1 for h in self.hidden_units), f"{c}.hidden_units",
                 self.hidden_units, "positive layer widths")
+        ScenarioDraws(self.target_motions, self.decoy_tiers, self.appearances)  # raises on a bad choice
+        require(is_int_at_least(self.finetune_steps, 0, numpy_ints=False), f"{c}.finetune_steps", self.finetune_steps,
+                "an integer >= 0")
+        require(isinstance(self.action_shaping, bool), f"{c}.action_shaping", self.action_shaping, "a bool")
         world_seed = dict(self.env_kwargs).get("world_seed")
         if world_seed is not None:  # training draws its worlds from the training split; a fixed one must be too
             require_training_worlds([world_seed], "TrainConfig.env_kwargs world_seed")
 
 
-def make_training_env(config: TrainConfig, rank: int, flat: bool = True) -> Callable[[], gym.Env]:
-    """Factory of worker `rank`'s env: scene-randomised, then (flat=True, for the learner) zero yaw, flat
-    features and an episode monitor; flat=False keeps the Dict observation (for the scripted demonstrator)."""
+def make_training_env(config: TrainConfig, rank: int, flat: bool = True,
+                       finetune: bool = False) -> Callable[[], gym.Env]:
+    """Factory of worker `rank`'s env: scene- and scenario-randomised, the action shaping (`action_shaping`), then
+    (flat=True, for the learner) zero yaw, flat features and an episode monitor; flat=False keeps the Dict
+    observation (for the scripted demonstrator). `finetune`: with `finetune_env_kwargs` on top."""
     from stable_baselines3.common.monitor import Monitor
+
+    kwargs = dict(config.env_kwargs) | (dict(config.finetune_env_kwargs) if finetune else {})
+    scenarios = ScenarioDraws(config.target_motions, config.decoy_tiers, config.appearances)
 
     def build() -> gym.Env:
         # SB3 seeds worker `rank`'s first reset with seed + rank, which fixes its whole stream of draws
-        env = SceneRandomizedEnv(config.scenes, episode_duration_s=config.episode_duration_s, **dict(config.env_kwargs))
+        env: gym.Env = SceneRandomizedEnv(config.scenes, scenarios, episode_duration_s=config.episode_duration_s,
+                                          **kwargs)
+        if config.action_shaping:
+            env = ShapedAction(env)
         return Monitor(FlatObservation(ZeroYawAction(env))) if flat else env
 
     return build
 
 
-def _vec_env(config: TrainConfig, flat: bool, seed: int):
+def _vec_env(config: TrainConfig, flat: bool, seed: int, finetune: bool = False):
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    fns = [make_training_env(config, rank, flat) for rank in range(config.n_envs)]
+    fns = [make_training_env(config, rank, flat, finetune) for rank in range(config.n_envs)]
     vec_env = SubprocVecEnv(fns, start_method="spawn") if config.n_envs > 1 else DummyVecEnv(fns)
     vec_env.seed(seed)
     return vec_env
@@ -186,6 +215,25 @@ def _learn(model, config: TrainConfig, callback) -> None:
                 reset_num_timesteps=not warmup)
 
 
+def _finetune(model, config: TrainConfig, callback, out: Path) -> dict:
+    """Continue `model` for `finetune_steps` on the fine-tune envs (the policy before it: policy_before_finetune.onnx);
+    returns the stage's record."""
+    from trade_gym.agents.export import export_onnx
+
+    before = export_onnx(model, out / "policy_before_finetune.onnx")
+    start_steps, start = model.num_timesteps, time.perf_counter()
+    # its own seed stream (seed + 1): the fine-tune's worlds and scenarios are not a replay of the first ones
+    vec_env = _vec_env(config, flat=True, seed=config.seed + 1, finetune=True)
+    try:
+        model.set_env(vec_env)
+        model.learn(total_timesteps=config.finetune_steps, callback=callback, reset_num_timesteps=False,
+                    progress_bar=config.progress_bar and _progress_bar_available())
+    finally:
+        vec_env.close()
+    return {"steps": int(model.num_timesteps - start_steps), "wall_time_s": round(time.perf_counter() - start, 1),
+            "onnx_sha256_before": before}
+
+
 def train(config: TrainConfig, out_dir: str | Path) -> dict:
     """(Warm-start,) train, save `model.zip`, export `policy.onnx`, write and return `train_record.json`."""
     import torch
@@ -219,6 +267,9 @@ def train(config: TrainConfig, out_dir: str | Path) -> dict:
         _learn(model, config, callback)
     finally:
         vec_env.close()
+    finetune = {}
+    if config.finetune_steps:
+        finetune = _finetune(model, config, callback, out)
     wall_s = time.perf_counter() - start
     model.save(out / "model.zip")
     digest = export_onnx(model, out / "policy.onnx")
@@ -226,6 +277,7 @@ def train(config: TrainConfig, out_dir: str | Path) -> dict:
         "config": asdict(config),
         "steps": int(model.num_timesteps),
         "warm_start": clone,
+        "finetune": finetune,
         "wall_time_s": round(wall_s, 1),
         "steps_per_s": round(model.num_timesteps / wall_s, 1),
         "onnx_sha256": digest,
@@ -268,7 +320,10 @@ def load_train_config(path: str | Path) -> TrainConfig:
                          f"missing {missing}")
     values = dict(data)
     values["scenes"], values["hidden_units"] = tuple(data["scenes"]), tuple(data["hidden_units"])
-    values["env_kwargs"] = tuple(dict(data["env_kwargs"] or {}).items())
+    for name in ("target_motions", "decoy_tiers", "appearances"):
+        values[name] = tuple(data[name])
+    for name in ("env_kwargs", "finetune_env_kwargs"):
+        values[name] = tuple(dict(data[name] or {}).items())
     if data["warm_start"] is not None:
         values["warm_start"] = WarmStartConfig(**data["warm_start"])
     return TrainConfig(**values)
@@ -290,6 +345,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--episode-duration-s", type=float, default=None)
     parser.add_argument("--env", type=_parse_env_kwarg, action="append", default=[], metavar="KEY=VALUE",
                         help="extra gym.make kwarg (repeatable), e.g. --env oracle_dropout_prob=0.1")
+    parser.add_argument("--finetune-steps", type=int, default=None, help="steps on finetune_env_kwargs after training")
     parser.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
     parser.add_argument("--from-scratch", action="store_true",
                         help="no warm start and no critic warm-up: PPO from a random initialisation")
@@ -308,7 +364,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     overrides = {"total_steps": args.steps, "n_envs": args.n_envs, "seed": args.seed,
                  "scenes": tuple(args.scenes) if args.scenes else None,
                  "episode_duration_s": args.episode_duration_s, "tensorboard_dir": args.tensorboard,
-                 "checkpoint_every_steps": args.checkpoint_every, "verbose": args.verbose}
+                 "checkpoint_every_steps": args.checkpoint_every, "verbose": args.verbose,
+                 "finetune_steps": args.finetune_steps}
     changes = {k: v for k, v in overrides.items() if v is not None}
     if args.env:
         changes["env_kwargs"] = tuple((dict(config.env_kwargs) | dict(args.env)).items())

@@ -6,7 +6,8 @@ an error naming the parameter and the value.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
 
 from trade.validation import (check_choice, check_non_negative, check_positive, check_range, is_int_at_least,
                              nested_config, require)
@@ -30,6 +31,8 @@ MS_PER_S = 1000.0
 # EnvConfig's fields that hold a component's whole config (given as the config or a mapping of its fields)
 NESTED_CONFIGS = {"reward": RewardConfig, "quadrotor": QuadrotorConfig, "vio": VioConfig}
 ORACLE_PREFIX = "oracle_"  # EnvConfig's oracle_<name> is OracleConfig's <name>
+# The scenario settings `reset(options=...)` may set for one episode (`EnvConfig.for_episode`)
+EPISODE_OPTIONS = ("decoys", "target_motion", "appearance")
 
 PHYSICS_RATE_HZ = 240
 CAMERA_RATE_HZ = 30
@@ -138,6 +141,16 @@ class EnvConfig:
     def oracle(self) -> OracleConfig:
         """The oracle's noise model: OracleConfig's fields from the `oracle_<field>` arguments."""
         return OracleConfig(**{f.name: getattr(self, ORACLE_PREFIX + f.name) for f in fields(OracleConfig)})
+
+    def for_episode(self, options: dict[str, Any] | None) -> EnvConfig:
+        """This config with the `reset(options=...)` scenario settings (EPISODE_OPTIONS) for one episode; ValueError
+        names an unknown option or a bad value."""
+        if not options:
+            return self
+        unknown = sorted(set(options) - set(EPISODE_OPTIONS))
+        if unknown:
+            raise ValueError(f"reset options {unknown} are not episode options; allowed: {list(EPISODE_OPTIONS)}")
+        return replace(self, **options)
 
     def camera_config(self) -> CameraConfig:
         """The camera these arguments describe (square image, field of view, pitch, renderer)."""

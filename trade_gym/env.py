@@ -107,6 +107,10 @@ class TradeFollowEnv(gym.Env):
     `effort` -0.05 mean(action^2); `crash` -150 on a crash (more than flying on until the lost-target timeout
     can lose, so a crash never pays).
 
+    ## Reset Options
+    `reset(options={"decoys": ..., "target_motion": ..., "appearance": ...})` (any subset) sets those arguments
+    for that episode only; other keys raise `ValueError`.
+
     ## Starting State
     The drone hovers at the scene's follow height with the target in view; tracking starts from
     the ground-truth box, optionally shifted by up to `init_frame_shift_max` frames and perturbed by
@@ -143,6 +147,7 @@ class TradeFollowEnv(gym.Env):
       paint, haze and camera effects per reset, `trade_gym.sim.appearance`); the reset's info gains `appearance`.
     - v0, issue 22: `renderer=` ("tiny", the default and as before: TinyRenderer; "egl": pybullet's EGL plugin).
     - v0, issue 41: the reward's `distance` is measured mostly in following-band distances (`RewardConfig`).
+    - v0, issue 41: `reset(options={...})` sets `decoys`, `target_motion` and `appearance` for that episode only.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -182,9 +187,9 @@ class TradeFollowEnv(gym.Env):
         p.resetSimulation(physicsClientId=cid)
         p.setGravity(0.0, 0.0, -GRAVITY_MPS2, physicsClientId=cid)
         p.setTimeStep(1.0 / PHYSICS_RATE_HZ, physicsClientId=cid)
-        rng, look_rng = self.np_random, appearance_stream(self.np_random, self.config.appearance)
-        world_rng = rng if self.config.world_seed is None else np.random.default_rng(self.config.world_seed)
-        cfg = self.config
+        cfg = self.config.for_episode(options)  # this episode's scenario (decoys, target motion, appearance)
+        rng, look_rng = self.np_random, appearance_stream(self.np_random, cfg.appearance)
+        world_rng = rng if cfg.world_seed is None else np.random.default_rng(cfg.world_seed)
         self.world = build_world(cid, cfg.scene, world_rng, cfg.target_speed_mps, DecoyTier(cfg.decoys, cfg.camera_fov_deg),
                                  TargetMotion(cfg.target_motion, cfg.camera_fov_deg), rendered=cfg.needs_rendering)
         self._look = EpisodeLook(look_rng, self.world, self.camera)

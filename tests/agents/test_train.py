@@ -27,7 +27,9 @@ EPISODE_S = 4.0
 TINY = TrainConfig(total_steps=12288, n_envs=1, n_steps_per_env=512, batch_size=128, n_epochs=10,
                    learning_rate=1e-3, use_sde=False, log_std_init=-1.5,
                    scenes=(EASY_SCENE,), episode_duration_s=EPISODE_S, env_kwargs=EASY_ENV, progress_bar=False,
-                   seed=0, warm_start=None, critic_warmup_steps=0)
+                   seed=0, warm_start=None, critic_warmup_steps=0, target_motions=("cruise",),
+                   decoy_tiers=("ambiguous",), appearances=("fixed",), action_shaping=False,
+                   finetune_steps=0)
 TERMS = ("visible", "distance", "height", "effort", "crash")
 EVAL_SEEDS = DEVELOPMENT.seeds(8)  # development worlds, as every test
 MIN_RETURN_MARGIN = 10.0  # mean per episode of 120 steps
@@ -56,8 +58,8 @@ def tiny_run(tmp_path_factory):
 
 def test_train_tiny_ppo_from_scratch_beats_hovering_and_random_actions_on_the_env_reward(tiny_run):
     out, record = tiny_run
-    # the policy PPO learned, as trained: without the follower's soft start (a quarter of these 4 s episodes) and
-    # acceleration limit
+    # the policy PPO learned, as trained (action_shaping=False): without the follower's soft start (a quarter of
+    # these 4 s episodes) and acceleration limit
     learned = returns(LearnedFollower(out / "policy.onnx", record["onnx_sha256"], soft_start_s=0.0,
                                       max_accel_unfixed_mps2=math.inf))
     floors = {"hover": returns(HoverPolicy()), "random": returns(RandomPolicy(seed=0))}
@@ -76,6 +78,9 @@ def test_train_record_holds_steps_hash_and_export_check(tiny_run):
     ({"algo": "a2c"}, "algo"), ({"total_steps": 0}, "total_steps"), ({"scenes": ("moon",)}, "scenes"),
     ({"gamma": 1.5}, "gamma"), ({"ent_coef": -1.0}, "ent_coef"), ({"algo": "sac"}, "warm_start"),
     ({"n_envs": 1.5}, "n_envs"), ({"hidden_units": ()}, "hidden_units"),
+    ({"target_motions": ("teleport",)}, "target_motions"), ({"decoy_tiers": ()}, "decoy_tiers"),
+    ({"appearances": ("sepia",)}, "appearances"), ({"finetune_steps": -1}, "finetune_steps"),
+    ({"action_shaping": 1}, "action_shaping"),
 ])
 def test_train_config_bad_value_raises_value_error_naming_field(kwargs, field):
     with pytest.raises(ValueError, match=field):
