@@ -1,19 +1,22 @@
 """The training env of learned followers: TradeFollow-v0 (its own reward) with the scene, the world seed and the
-scenario (target motion, decoy tier, appearance) drawn per episode, and the 3-D action that holds the yaw rate at
-zero.
+scenario (target motion, decoy tier, appearance) drawn per episode (`EpisodeDraws`, a wrapper of any TradeFollow-v0,
+as rl-zoo3's `env_wrapper` composes it), and the 3-D action that holds the yaw rate at zero.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.utils import seeding
 
 from trade.validation import require
 from trade_gym.action import ACTION_NAMES, action_space
 from trade_gym.bench.splits import TRAINING
+from trade_gym.config import SCENE_NAMES
 from trade_gym.env import TradeFollowEnv
 from trade_gym.sim.appearance import APPEARANCE_MODES
 from trade_gym.sim.scenes import DECOY_TIERS
@@ -49,45 +52,63 @@ def _pick(choices: tuple[str, ...], rng: np.random.Generator) -> str:
     return choices[0] if len(choices) == 1 else choices[int(rng.integers(len(choices)))]
 
 
-class SceneRandomizedEnv(gym.Env):
-    """TradeFollow-v0 with the scene, the world seed (from the training split) and the scenario (`ScenarioDraws`)
-    drawn per episode from this env's generator; the reward is the env's own.
+def draw_episode(rng: np.random.Generator, scenes: tuple[str, ...],
+                 scenarios: ScenarioDraws) -> tuple[int, dict[str, str]]:
+    """One training episode: (world seed from the training split, reset options with the scene and the scenario)."""
+    scene = scenes[int(rng.integers(len(scenes)))]
+    world_seed = int(rng.integers(TRAINING.first, TRAINING.last + 1))  # training worlds only
+    return world_seed, {"scene": scene} | scenarios.draw(rng)
 
-    One inner env per scene (built on first use); `reset(seed=s)` reseeds the draws."""
 
-    metadata = {"render_modes": []}
+class EpisodeDraws(gym.Wrapper):
+    """A TradeFollow env reset per episode on a drawn scene, training-split world seed and scenario
+    (`draw_episode`): `reset(seed=world_seed, options={"scene": ..., <scenario>})`, the caller's options on top.
 
-    def __init__(self, scenes: tuple[str, ...], scenarios: ScenarioDraws = ScenarioDraws(), **env_kwargs: Any) -> None:
-        self.scenes = tuple(scenes)
-        self.scenarios = scenarios
-        self.env_kwargs = env_kwargs
-        self._envs: dict[str, TradeFollowEnv] = {}
-        probe = self._env(self.scenes[0])
-        self.observation_space, self.action_space = probe.observation_space, probe.action_space
-        self.scene = self.scenes[0]
+    The draws come from a generator of the wrapper's own, which `reset(seed=s)` reseeds (as SB3 seeds each worker's
+    first reset). It wraps the env `gym.make("TradeFollow-v0", ...)` made, whatever wraps that (rl-zoo3's Monitor):
+    its kwargs are `TrainConfig`'s fields of the same names (lists welcome, as YAML gives them)."""
 
-    def _env(self, scene: str) -> TradeFollowEnv:
-        if scene not in self._envs:
-            self._envs[scene] = TradeFollowEnv(scene=scene, **self.env_kwargs)
-        return self._envs[scene]
+    def __init__(self, env: gym.Env, scenes: Sequence[str] = SCENE_NAMES,
+                 target_motions: Sequence[str] = ScenarioDraws.target_motions,
+                 decoy_tiers: Sequence[str] = ScenarioDraws.decoy_tiers,
+                 appearances: Sequence[str] = ScenarioDraws.appearances) -> None:
+        super().__init__(env)
+        self.scenes = _checked_scenes(scenes)
+        self.scenarios = ScenarioDraws(tuple(target_motions), tuple(decoy_tiers), tuple(appearances))
+        self._draws: np.random.Generator | None = None
+        self.scene = self.scenes[0]  # the current episode's
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        self.scene = self.scenes[int(self.np_random.integers(len(self.scenes)))]
-        world_seed = int(self.np_random.integers(TRAINING.first, TRAINING.last + 1))  # training worlds only
-        episode = self.scenarios.draw(self.np_random) | (options or {})
-        obs, info = self._env(self.scene).reset(seed=world_seed, options=episode)
+        if seed is not None or self._draws is None:
+            self._draws, _ = seeding.np_random(seed)  # as gym.Env.reset seeds its np_random
+        world_seed, episode = draw_episode(self._draws, self.scenes, self.scenarios)
+        episode |= options or {}
+        self.scene = episode["scene"]
+        obs, info = self.env.reset(seed=world_seed, options=episode)
         return obs, {**info, "scene": self.scene, "world_seed": world_seed}
 
     def step(self, action):
-        obs, reward, terminated, truncated, info = self._envs[self.scene].step(action)
+        obs, reward, terminated, truncated, info = self.env.step(action)
         info["scene"] = self.scene  # for the learning curve's per-scene rows
         return obs, reward, terminated, truncated, info
 
-    def close(self) -> None:
-        for env in self._envs.values():
-            env.close()
-        self._envs.clear()
+
+def _checked_scenes(scenes: Sequence[str]) -> tuple[str, ...]:
+    require(bool(scenes) and all(s in SCENE_NAMES for s in scenes), "scenes", scenes,
+            f"a non-empty subset of {SCENE_NAMES}")
+    return tuple(scenes)
+
+
+class SceneRandomizedEnv(EpisodeDraws):
+    """TradeFollow-v0 built with `env_kwargs`, its scene, world seed (from the training split) and scenario
+    (`ScenarioDraws`) drawn per episode (`EpisodeDraws`); the reward is the env's own.
+
+    One env for every scene: each reset builds the episode's world, so the episodes are those of one env per scene."""
+
+    def __init__(self, scenes: Sequence[str], scenarios: ScenarioDraws = ScenarioDraws(), **env_kwargs: Any) -> None:
+        scenes = _checked_scenes(scenes)
+        super().__init__(TradeFollowEnv(scene=scenes[0], **env_kwargs), scenes, scenarios.target_motions,
+                         scenarios.decoy_tiers, scenarios.appearances)
 
 
 class ZeroYawAction(gym.ActionWrapper):

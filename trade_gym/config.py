@@ -31,8 +31,9 @@ MS_PER_S = 1000.0
 # EnvConfig's fields that hold a component's whole config (given as the config or a mapping of its fields)
 NESTED_CONFIGS = {"reward": RewardConfig, "quadrotor": QuadrotorConfig, "vio": VioConfig}
 ORACLE_PREFIX = "oracle_"  # EnvConfig's oracle_<name> is OracleConfig's <name>
-# The scenario settings `reset(options=...)` may set for one episode (`EnvConfig.for_episode`)
-EPISODE_OPTIONS = ("decoys", "target_motion", "appearance")
+# The settings `reset(options=...)` may set for one episode (`EnvConfig.for_episode`): the scene and the scenario.
+# Each reset builds its world from them; nothing the env builds at construction depends on them.
+EPISODE_OPTIONS = ("scene", "decoys", "target_motion", "appearance")
 
 PHYSICS_RATE_HZ = 240
 CAMERA_RATE_HZ = 30

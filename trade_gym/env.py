@@ -108,8 +108,8 @@ class TradeFollowEnv(gym.Env):
     can lose, so a crash never pays).
 
     ## Reset Options
-    `reset(options={"decoys": ..., "target_motion": ..., "appearance": ...})` (any subset) sets those arguments
-    for that episode only; other keys raise `ValueError`.
+    `reset(options={"scene": ..., "decoys": ..., "target_motion": ..., "appearance": ...})` (any subset) sets those
+    arguments for that episode only (`episode_config` holds the episode's arguments); other keys raise `ValueError`.
 
     ## Starting State
     The drone hovers at the scene's follow height with the target in view; tracking starts from
@@ -148,6 +148,7 @@ class TradeFollowEnv(gym.Env):
     - v0, issue 22: `renderer=` ("tiny", the default and as before: TinyRenderer; "egl": pybullet's EGL plugin).
     - v0, issue 41: the reward's `distance` is measured mostly in following-band distances (`RewardConfig`).
     - v0, issue 41: `reset(options={...})` sets `decoys`, `target_motion` and `appearance` for that episode only.
+    - v0, issue 44: `reset(options={...})` sets the `scene` too (a wrapper above the env can draw it per episode).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -155,6 +156,7 @@ class TradeFollowEnv(gym.Env):
 
     def __init__(self, **kwargs: Any) -> None:
         self.config = EnvConfig(**kwargs)
+        self.episode_config = self.config  # the config of the current episode: `config` with its reset options
         self.render_mode = self.config.render_mode
         self.quad_config = self.config.quadrotor
         self.camera_config = self.config.camera_config()
@@ -187,7 +189,7 @@ class TradeFollowEnv(gym.Env):
         p.resetSimulation(physicsClientId=cid)
         p.setGravity(0.0, 0.0, -GRAVITY_MPS2, physicsClientId=cid)
         p.setTimeStep(1.0 / PHYSICS_RATE_HZ, physicsClientId=cid)
-        cfg = self.config.for_episode(options)  # this episode's scenario (decoys, target motion, appearance)
+        cfg = self.episode_config = self.config.for_episode(options)  # this episode's scene and scenario
         rng, look_rng = self.np_random, appearance_stream(self.np_random, cfg.appearance)
         world_rng = rng if cfg.world_seed is None else np.random.default_rng(cfg.world_seed)
         self.world = build_world(cid, cfg.scene, world_rng, cfg.target_speed_mps, DecoyTier(cfg.decoys, cfg.camera_fov_deg),

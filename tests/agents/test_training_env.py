@@ -1,5 +1,5 @@
-"""The training env's breadth: per-episode scenario options of the env, their draws, and the action shaping the
-policy trains under (the same as `LearnedFollower` flies with)."""
+"""The training env's breadth: per-episode scene and scenario options of the env, their draws, and the action shaping
+the policy trains under (the same as `LearnedFollower` flies with)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,12 @@ from trade_gym.agents.action_shaping import ActionShaping, ActionShapingConfig, 
 from trade_gym.agents.learned import LearnedFollower
 from trade_gym.agents.obs_flatten import flatten_observation
 from trade_gym.agents.train import TrainConfig, train
-from trade_gym.agents.training_env import ScenarioDraws, SceneRandomizedEnv
+from trade_gym.agents.training_env import EpisodeDraws, ScenarioDraws, SceneRandomizedEnv
+from trade_gym.config import SCENE_NAMES
 from trade_gym.env import TradeFollowEnv
+from trade_gym.sim.appearance import APPEARANCE_MODES
+from trade_gym.sim.scenes import DECOY_TIERS
+from trade_gym.sim.target_motion import TARGET_MOTIONS
 
 ORACLE = {"perception": "oracle", "episode_duration_s": 0.2}
 
@@ -40,14 +44,14 @@ def test_reset_option_equals_making_the_env_with_that_argument():
             env.close()
 
     made = first_steps(TradeFollowEnv(scene="city", target_motion="stop_and_go", decoys="parked", **ORACLE))
-    option = first_steps(TradeFollowEnv(scene="city", **ORACLE),
-                         options={"target_motion": "stop_and_go", "decoys": "parked"})
+    option = first_steps(TradeFollowEnv(scene="desert", **ORACLE),
+                         options={"scene": "city", "target_motion": "stop_and_go", "decoys": "parked"})
     for a, b in zip(made, option, strict=True):
         np.testing.assert_array_equal(a, b)
 
 
-@pytest.mark.parametrize("options, words", [({"scene": "city"}, "'scene'"), ({"target_motion": "teleport"},
-                                                                               "teleport"),
+@pytest.mark.parametrize("options, words", [({"world_seed": 3}, "'world_seed'"), ({"scene": "forest"}, "forest"),
+                                            ({"target_motion": "teleport"}, "teleport"),
                                             ({"appearance": "sepia"}, "sepia")])
 def test_bad_reset_option_raises_value_error_naming_it(options, words):
     env = TradeFollowEnv(scene="desert", **ORACLE)
@@ -78,8 +82,47 @@ def test_scene_randomized_env_draws_scenarios_per_episode_into_the_env():
         seen = set()
         for k in range(12):
             _, info = env.reset(seed=k)
-            seen.add((info["target_motion"]["mode"], len(env._envs["desert"].world.decoys) > 0))
+            seen.add((info["target_motion"]["mode"], len(env.unwrapped.world.decoys) > 0))
         assert seen == {("cruise", False), ("cruise", True), ("evasive", False), ("evasive", True)}
+    finally:
+        env.close()
+
+
+def test_one_env_for_every_scene_flies_the_episodes_of_an_env_made_for_each():
+    """SceneRandomizedEnv resets one env on each episode's drawn scene, world and scenario; an env made for that
+    scene and reset on the same world seed and scenario flies the same episode."""
+    scenarios = ScenarioDraws(TARGET_MOTIONS, DECOY_TIERS, APPEARANCE_MODES)
+    env = SceneRandomizedEnv(SCENE_NAMES, scenarios, **ORACLE)
+    actions = np.random.default_rng(4).uniform(-1.0, 1.0, (4, 4)).astype(np.float32)
+    scenes = set()
+    try:
+        for k in range(6):
+            obs, info = env.reset(seed=11) if k == 0 else env.reset()
+            episode = env.unwrapped.episode_config
+            scenes.add(info["scene"])
+            flown = [obs] + [env.step(a)[0] for a in actions]
+            alone = TradeFollowEnv(scene=info["scene"], **ORACLE)
+            try:
+                options = {o: getattr(episode, o) for o in ("decoys", "target_motion", "appearance")}
+                again = [alone.reset(seed=info["world_seed"], options=options)[0]] + [alone.step(a)[0]
+                                                                                      for a in actions]
+            finally:
+                alone.close()
+            for a, b in zip(flown, again, strict=True):
+                for key in a:
+                    np.testing.assert_array_equal(a[key], b[key])
+        assert len(scenes) > 1
+    finally:
+        env.close()
+
+
+def test_episode_draws_refuse_an_unknown_scene_naming_it():
+    env = TradeFollowEnv(**ORACLE)
+    try:
+        with pytest.raises(ValueError, match="scenes.*forest"):
+            EpisodeDraws(env, scenes=["desert", "forest"])
+        with pytest.raises(ValueError, match="decoy_tiers"):
+            EpisodeDraws(env, decoy_tiers=[])
     finally:
         env.close()
 

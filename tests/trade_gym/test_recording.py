@@ -213,3 +213,15 @@ def test_trade_bench_record_writes_each_run_and_replays_to_its_hash(tmp_path, ca
     capsys.readouterr()
     assert bench_main(argv + ["--record", str(tmp_path / "rec"), "--out", str(tmp_path / "again")]) == 2
     assert "exists already" in capsys.readouterr().err and not (tmp_path / "again").exists()
+
+
+def test_recording_names_the_scene_and_scenario_of_the_episode_its_reset_options_set(tmp_path):
+    env = RecordSequence(TradeFollowEnv(scene="desert", perception="oracle", camera_size=32), tmp_path)
+    try:
+        env.reset(seed=SEED, options={"scene": "city", "decoys": "none"})
+        env.step(np.zeros(4, np.float32))
+    finally:
+        env.close()
+    meta = open_sequence(env.written[0]).meta
+    assert meta["scene"] == "city"
+    assert meta["source"]["env_config"]["scene"] == "city" and meta["source"]["env_config"]["decoys"] == "none"

@@ -147,7 +147,7 @@ class RecordSequence(gym.Wrapper):
 
     def _meta(self, seed: int | None) -> SequenceMeta:
         base = self._base
-        config = base.config
+        config = base.episode_config  # the episode's scene and scenario (reset options included)
         if self._commit is None:
             self._commit = git_commit()
         world_seed = config.world_seed if config.world_seed is not None else seed
