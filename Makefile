@@ -3,6 +3,7 @@ PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+ZOO_STAMP := $(VENV)/.installed-zoo
 # make test's reference check writes its results here (git-ignored)
 CHECK_OUT := reference_check_out
 # extra pip arguments for torch, e.g. --index-url https://download.pytorch.org/whl/cpu where pip's find-links hold no
@@ -47,7 +48,12 @@ test-py312:
 test-py313:
 	$(MAKE) test PYTHON=$(PYTHON313) VENV=.venv-py313 CHECK_OUT=reference_check_out_py313
 
-test-slow: $(STAMP)
+# the slow suite also trains with rl-zoo3 (the zoo extra, installed once into the venv)
+$(ZOO_STAMP): $(STAMP)
+	$(PY) -m pip install --quiet -e ".[zoo]"
+	touch $(ZOO_STAMP)
+
+test-slow: $(ZOO_STAMP)
 	$(PY) -m pytest -q -m slow
 
 bench: $(STAMP)
