@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from trade_gym.bench import cli, runner
+from trade_gym.bench import cli, executors, runner
 from trade_gym.bench.executors import LocalExecutor, RayExecutor
 from trade_gym.bench.results import deterministic_part, to_json_safe
 from trade_gym.bench.suites import RunSpec, Selection, expand_suite
@@ -108,7 +108,7 @@ def _remove_when_held(cluster, node, log_dir: Path, first_result: threading.Even
     removed.set()
 
 
-def test_node_lost_mid_suite_costs_only_its_run_retried_on_another_node(nodes, tmp_path):
+def test_node_lost_mid_suite_costs_only_its_run_retried_on_another_node(nodes, tmp_path, caplog):
     doomed = nodes.add_node(num_cpus=NODE_CPUS, object_store_memory=NODE_OBJECT_STORE_BYTES)
     specs = _oracle_specs(("hover", "random"), (0, 1), SHORT_STEPS)
     first_result, removed = threading.Event(), threading.Event()
@@ -121,7 +121,8 @@ def test_node_lost_mid_suite_costs_only_its_run_retried_on_another_node(nodes, t
         progress.append((done, total, result.spec.run_id))
         first_result.set()
 
-    on_ray = RayExecutor(task=functools.partial(on_node, str(tmp_path), doomed.node_id)).map(specs, on_done)
+    with caplog.at_level(logging.WARNING, logger=executors.__name__):
+        on_ray = RayExecutor(task=functools.partial(on_node, str(tmp_path), doomed.node_id)).map(specs, on_done)
     remover.join(REMOVE_TIMEOUT_S)
     assert removed.is_set(), "no run was held on the added node, or no run finished elsewhere"
     assert [r.spec for r in on_ray] == specs
@@ -133,6 +134,8 @@ def test_node_lost_mid_suite_costs_only_its_run_retried_on_another_node(nodes, t
     assert Counter(run_id for run_id, _ in attempts) == Counter([s.run_id for s in specs] + lost)
     retry_node = [node for run_id, node in attempts if run_id == lost[0]][1]
     assert retry_node in {n.node_id for n in nodes.list_all_nodes()}  # a surviving node
+    (retry,) = [r.getMessage() for r in caplog.records if r.name == executors.__name__]
+    assert retry.startswith(f"{lost[0]}: its worker died (NodeDiedError: ") and retry.endswith("attempt 2 of 2")
     assert [(d, t) for d, t, _ in progress] == [(n, len(specs)) for n in range(1, len(specs) + 1)]
     assert sorted(run_id for _, _, run_id in progress) == sorted(s.run_id for s in specs)  # reported once each
 
