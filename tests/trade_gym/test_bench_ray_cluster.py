@@ -31,12 +31,13 @@ HOLD_S = 120.0  # a run that starts on the node to be removed waits there this l
 REMOVE_TIMEOUT_S = 90.0  # how long the remover waits for a held run and a first result
 ATTEMPTS_LOG = "attempts.log"
 HELD_MARKER = "held"
+NODE_DEATH_TIMEOUT_S = 60.0  # until Ray has marked a killed node dead
 
 
 @pytest.fixture(scope="module")
-def nodes():
+def cluster():
     """A head node and one worker node, 1 CPU each, this process connected as the driver; shut down even when a
-    test fails. A test may add nodes of its own."""
+    test fails. A test may add and remove nodes of its own."""
     ray = pytest.importorskip("ray", reason="the ray extra is not installed (make test installs it)")
     from ray.cluster_utils import Cluster
 
@@ -49,6 +50,14 @@ def nodes():
     finally:
         ray.shutdown()
         cluster.shutdown()
+
+
+@pytest.fixture
+def nodes(cluster):
+    """The module's cluster once Ray counts exactly its nodes: Ray notices a killed node's death by health checks,
+    ~16 s after the kill here, and counts its CPUs until then."""
+    cluster.wait_for_nodes(timeout=NODE_DEATH_TIMEOUT_S)
+    return cluster
 
 
 def on_node(log_dir: str, hold_on: str | None, spec: RunSpec) -> runner.RunResult:
