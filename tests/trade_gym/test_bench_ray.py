@@ -95,19 +95,23 @@ def test_ray_run_raising_is_that_runs_error_while_others_finish(cluster):
 
 
 @pytest.mark.parametrize("backend", ["ray", "local"])
-def test_dead_worker_run_retried_once_then_reported_others_finish(backend, request, tmp_path):
+def test_dead_worker_run_retried_once_then_reported_others_finish(backend, request, tmp_path, caplog):
     if backend == "ray":
         request.getfixturevalue("cluster")
     task = functools.partial(die_on_attempts, str(tmp_path), {DIES_ONCE_SEED: 1, DEAD_SEED: 2})
     executor = RayExecutor(task=task) if backend == "ray" else LocalExecutor(CLUSTER_CPUS, task=task)
     specs = expand_suite(None, Selection(scenes=("desert",), policies=("hover",), seeds=(0, DEAD_SEED),
                                          steps=SHORT_STEPS), POLICIES)
-    never, once, always = executor.map(specs)
+    with caplog.at_level(logging.WARNING, logger=LocalExecutor.__module__):
+        never, once, always = executor.map(specs)
     assert never.error is None and once.error is None
     assert _comparable([never, once]) == _comparable(LocalExecutor(1).map(specs[:2]))
     assert always.error.startswith("its worker process died in all 2 attempts (") and always.metrics == {}
     attempts = {seed: len((tmp_path / f"seed{seed}.log").read_text().splitlines()) for seed in (0, 1, 2)}
     assert attempts == {0: 1, DIES_ONCE_SEED: 2, DEAD_SEED: 2}  # our one retry, none by Ray or the pool
+    retried = sorted(r.getMessage() for r in caplog.records if r.name == LocalExecutor.__module__)
+    assert [m.split(": ")[0] for m in retried] == [once.spec.run_id, always.spec.run_id]
+    assert all(": its worker died (" in m and m.endswith("running it again, attempt 2 of 2") for m in retried)
 
 
 def test_cli_ray_backend_results_match_local_and_record_backend(cluster, tmp_path, capsys):

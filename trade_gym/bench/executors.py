@@ -1,5 +1,6 @@
 """Where benchmark runs execute: this process, local worker processes, or a Ray cluster (one task per run).
-All backends share the progress callback, the one retry of a run whose worker died, and the result order.
+All backends share the progress callback, the one retry of a run whose worker died (a logged warning), and the
+result order.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ MAX_PORT = 65535
 TASK_CPUS = 1  # one episode per CPU: the env, its pybullet client and onnxruntime are single-threaded
 # A local cluster's object store holds only finished results (a few kB each).
 LOCAL_OBJECT_STORE_BYTES = 96 * 2**20
+logger = logging.getLogger(__name__)  # a retried run is a warning here; nothing else is logged
 
 
 class BackendUnavailable(RuntimeError):
@@ -92,6 +94,8 @@ class _Ledger:
         """Count a death of run `index`'s worker: True to run it again, else it is recorded as failed."""
         self._deaths[index] += 1
         if self._deaths[index] <= WORKER_DEATH_RETRIES:
+            logger.warning("%s: its worker died (%s); running it again, attempt %d of %d", self.specs[index].run_id,
+                           reason, self._deaths[index] + 1, WORKER_DEATH_RETRIES + 1)
             return True
         self.fail(index, f"its worker process died in all {self._deaths[index]} attempts ({reason})")
         return False
