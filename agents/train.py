@@ -215,6 +215,17 @@ def _learn(model, config: TrainConfig, callback) -> None:
                 reset_num_timesteps=not warmup)
 
 
+def _callbacks(config: TrainConfig, out: Path):
+    """The learning curve (learning_curve.csv: every training episode's return and distance) and checkpoints."""
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+
+    callbacks = [curve_callback(out)]
+    if config.checkpoint_every_steps:
+        every_call = max(config.checkpoint_every_steps // config.n_envs, 1)  # one call steps every env
+        callbacks.append(CheckpointCallback(every_call, str(out / "checkpoints"), name_prefix="model"))
+    return CallbackList(callbacks)
+
+
 def _finetune(model, config: TrainConfig, callback, out: Path) -> dict:
     """Continue `model` for `finetune_steps` on the fine-tune envs (the policy before it: policy_before_finetune.onnx);
     returns the stage's record."""
@@ -257,13 +268,7 @@ def train(config: TrainConfig, out_dir: str | Path) -> dict:
             clone = warm_start(model, config)
             # the clone alone, for comparison with the fine-tuned policy
             clone["onnx_sha256"] = export_onnx(model, out / "policy_warm_start.onnx")
-        from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
-
-        callbacks = [curve_callback(out)]  # learning_curve.csv: every training episode's return and distance
-        if config.checkpoint_every_steps:
-            every_call = max(config.checkpoint_every_steps // config.n_envs, 1)  # one call steps every env
-            callbacks.append(CheckpointCallback(every_call, str(out / "checkpoints"), name_prefix="model"))
-        callback = CallbackList(callbacks)
+        callback = _callbacks(config, out)
         _learn(model, config, callback)
     finally:
         vec_env.close()
