@@ -22,7 +22,7 @@ from trade_gym.action import ACTION_DIM, ActionScale, action_space, clip_action
 from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.faults import SensorFilter
-from trade_gym.ground_truth import GroundTruth, VehicleBox, box_corners, compute_ground_truth
+from trade_gym.ground_truth import GroundTruth, VehicleBoxes, compute_ground_truth
 from trade_gym.latency import EstimateDelay
 from trade_gym.observation import build_observation, observation_space
 from trade_gym.perception.base import PerceptionOutput, SensorFrame
@@ -203,7 +203,7 @@ class TradeFollowEnv(gym.Env):
         self.imu.prime_at_rest(self._state.R_world_body, GRAVITY_MPS2, CAMERA_RATE_HZ, rng)
         self.pose_source = make_pose_source(self.config.pose_source, rng=rng, vio_config=self.config.vio)
         self._t_s = 0.0
-        self._cache_parked_decoys()
+        self._vehicles = VehicleBoxes(self.world, self._t_s)
         self._steps = 0
         self._distance_flown_m = 0.0
         self._time_lost_s = 0.0
@@ -381,17 +381,17 @@ class TradeFollowEnv(gym.Env):
         else:
             frame = None
         self._last_frame = frame
-        target_box = self._vehicle_box(self.world.target)
+        target_box = self._vehicles.box(self.world.target, self._t_s)
         truth = compute_ground_truth(
             self._require_client(),
             self.camera.intrinsics,
             T_world_cam,
             target_box,
             self.world.target_velocity_mps(self._t_s),
-            self._vehicle_corners(target_box) if frame is None else np.zeros((0, 8, 3)),
+            self._vehicles.corners(target_box, self._t_s) if frame is None else np.zeros((0, 8, 3)),
             None if frame is None else frame.seg,
             self.world.target.body_id,
-            self._decoy_ids,
+            self._vehicles.decoy_ids,
             max_range_m=self._state.position_m[2] + GROUND_RAY_RANGE_M,
         )
         self._last_truth = truth
@@ -401,27 +401,6 @@ class TradeFollowEnv(gym.Env):
         if self._sensor_filter is not None:
             sensors = self._sensor_filter.filter_sensors(sensors, truth)
         return sensors, truth
-
-    def _vehicle_corners(self, target_box: VehicleBox) -> np.ndarray:
-        """(1 + D, 8, 3) world corners of the target and the decoys, in one buffer refilled in place
-        (read-only for callers); parked decoys' corners are computed once per episode."""
-        corners = self._corners
-        corners[0] = box_corners(target_box)
-        for i, decoy in self._moving_decoys:
-            corners[1 + i] = box_corners(self._vehicle_box(decoy))
-        return corners
-
-    def _cache_parked_decoys(self) -> None:
-        decoys = self.world.decoys
-        self._decoy_ids = [d.body_id for d in decoys]
-        self._moving_decoys = [(i, d) for i, d in enumerate(decoys) if d.motion.is_moving]
-        self._corners = np.zeros((1 + len(decoys), 8, 3))
-        for i, decoy in enumerate(decoys):
-            self._corners[1 + i] = box_corners(self._vehicle_box(decoy))
-
-    def _vehicle_box(self, vehicle) -> VehicleBox:
-        position, R = self.world.vehicle_pose(vehicle, self._t_s)
-        return VehicleBox(position, R, np.asarray(vehicle.half_extents_m, dtype=np.float64))
 
     def _perturbed_init_box(self, box: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         jitter = self.config.init_box_perturb_px

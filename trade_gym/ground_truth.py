@@ -9,12 +9,17 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
 from trade.geometry import CameraIntrinsics, Pose
+
+if TYPE_CHECKING:
+    from trade_gym.sim.vehicles import Vehicle
+    from trade_gym.sim.world import World
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -63,6 +68,34 @@ class GroundTruth:
 def box_corners(box: VehicleBox) -> FloatArray:
     """(8, 3) world corners [m] of a vehicle's box."""
     return box.points(_UNIT_CORNERS)
+
+
+class VehicleBoxes:
+    """An episode's vehicles as boxes: each vehicle's box at a time, and the (1 + D, 8, 3) world corners of the
+    target and the D decoys in one buffer refilled in place (read-only for callers); parked decoys' corners are
+    computed once, at construction (time `t_s` [s])."""
+
+    def __init__(self, world: World, t_s: float) -> None:
+        self._world = world
+        decoys = world.decoys
+        self.decoy_ids = [d.body_id for d in decoys]
+        self._moving_decoys = [(i, d) for i, d in enumerate(decoys) if d.motion.is_moving]
+        self._corners = np.zeros((1 + len(decoys), 8, 3))
+        for i, decoy in enumerate(decoys):
+            self._corners[1 + i] = box_corners(self.box(decoy, t_s))
+
+    def box(self, vehicle: Vehicle, t_s: float) -> VehicleBox:
+        """`vehicle`'s box at time `t_s` [s]."""
+        position, R = self._world.vehicle_pose(vehicle, t_s)
+        return VehicleBox(position, R, np.asarray(vehicle.half_extents_m, dtype=np.float64))
+
+    def corners(self, target_box: VehicleBox, t_s: float) -> FloatArray:
+        """(1 + D, 8, 3) world corners [m]: the target's (`target_box`), then the decoys' at time `t_s` [s]."""
+        corners = self._corners
+        corners[0] = box_corners(target_box)
+        for i, decoy in self._moving_decoys:
+            corners[1 + i] = box_corners(self.box(decoy, t_s))
+        return corners
 
 
 @functools.lru_cache(maxsize=8)

@@ -17,7 +17,7 @@ def test_ground_truth_ray_batch_equals_separate_visibility_and_ground_ray_tests(
             _, _, _, _, info = env.step(np.array([0.4, 0.2, 0.0, 0.0], np.float32))
             truth = env._last_truth
             T = env._true_camera_pose()
-            box = env._vehicle_box(env.world.target)
+            box = env._vehicles.box(env.world.target, env._t_s)
             assert truth.target_visible_fraction == visible_fraction(env._client, env.camera.intrinsics, T, box)
             centre = truth.target_bbox[:2] + truth.target_bbox[2:] / 2.0
             expected = ground_depth(env._client, env.camera.intrinsics, T, centre,
@@ -34,7 +34,7 @@ def test_projected_boxes_of_all_vehicles_equal_each_vehicle_projected_alone():
         for _ in range(20):
             env.step(np.array([0.3, -0.2, 0.0, 0.0], np.float32))
             T_cam_world = env._true_camera_pose().inverse()
-            corners = env._vehicle_corners(env._vehicle_box(env.world.target))
+            corners = env._vehicles.corners(env._vehicles.box(env.world.target, env._t_s), env._t_s)
             together = projected_boxes(env.camera.intrinsics, T_cam_world, corners)
             alone = np.concatenate([projected_boxes(env.camera.intrinsics, T_cam_world, c[None]) for c in corners])
             assert np.array_equal(together, alone, equal_nan=True)
