@@ -185,3 +185,85 @@ def test_quadrotor_config_invalid_tilt_raises_naming_field():
         QuadrotorConfig(max_tilt_deg=95.0)
     with pytest.raises(ValueError, match="mass_kg"):
         QuadrotorConfig(mass_kg=0.0)
+
+
+# Position setpoints (PX4 offboard style): the critically damped cascade reaches a step's goal without overshoot. On
+# these steps the measured overshoot along the step is 0 (the drone stops short and creeps in) and the heading's
+# 0.004 rad; the bounds leave room for float drift, not for a ringing controller. While the drone tilts to
+# accelerate, its heading (body x projected on the ground) swings by up to 0.040 rad (measured) and comes back.
+POSITION_OVERSHOOT_BOUND_M = 0.05
+YAW_OVERSHOOT_BOUND_RAD = 0.01
+HEADING_SWING_BOUND_RAD = 0.05
+ANGLE_ROUNDING_RAD = 1e-9  # "never exceeds" up to float rounding
+GOAL_RADIUS_M = 0.3
+YAW_TOLERANCE_RAD = 0.02
+POSITION_STEPS = [  # world offset [m], heading change [rad], time to come within GOAL_RADIUS_M [s] (measured 3.2-7.1)
+    ([5.0, 0.0, 0.0], 0.0, 6.0), ([14.0, 14.0, 0.0], 0.0, 8.0), ([3.0, 4.0, 2.0], 0.0, 6.0),
+    ([0.0, 0.0, -5.0], 0.0, 4.0), ([0.0, 0.0, 0.0], 1.0, 2.0), ([-20.0, 0.0, 0.0], -math.pi / 2, 8.0),
+]
+
+
+@pytest.mark.parametrize("offset_m, yaw_change_rad, settle_s", POSITION_STEPS)
+def test_position_setpoint_reached_and_held_without_overshoot(world, offset_m, yaw_change_rad, settle_s):
+    quad = Quadrotor(world.client, QuadrotorConfig())
+    quad.spawn([0.0, 0.0, 30.0], 0.3)
+    start = quad.read_state()
+    goal = start.position_m + np.array(offset_m)
+    quad.set_position_setpoint(goal, start.yaw_rad + yaw_change_rad)
+    log = _fly(quad, settle_s + 2.0)
+    error = np.linalg.norm(log["pos"] - goal, axis=1)
+    settled = slice(int(settle_s / PHYSICS_DT_S), None)
+    assert np.all(error[settled] < GOAL_RADIUS_M)  # reached by settle_s and held for 2 s more
+    distance = np.linalg.norm(offset_m)
+    if distance > 0.0:
+        along = (log["pos"] - start.position_m) @ (np.array(offset_m) / distance)
+        assert np.max(along) <= distance + POSITION_OVERSHOOT_BOUND_M
+    turned = np.unwrap(log["yaw"]) - start.yaw_rad
+    assert abs(turned[-1] - yaw_change_rad) < YAW_TOLERANCE_RAD
+    if yaw_change_rad:
+        assert np.max(np.sign(yaw_change_rad) * (turned - yaw_change_rad)) <= YAW_OVERSHOOT_BOUND_RAD
+    else:
+        assert np.max(np.abs(turned)) <= HEADING_SWING_BOUND_RAD
+
+
+def test_position_controller_flies_within_the_setpoint_limits(world):
+    config = QuadrotorConfig()
+    quad = Quadrotor(world.client, config)
+    quad.spawn([0.0, 0.0, 30.0], 0.0)
+    quad.set_position_setpoint([100.0, -80.0, 80.0], math.pi)  # far: every limit binds
+    log = _fly(quad, 6.0)
+    assert np.max(np.linalg.norm(log["v"][:, :2], axis=1)) <= config.max_speed_horizontal_mps + SPEED_TOLERANCE_MPS
+    assert np.max(np.abs(log["v"][:, 2])) <= config.max_speed_vertical_mps + SPEED_TOLERANCE_MPS
+    assert np.max(_tilt_deg(log["R"])) <= config.max_tilt_deg
+
+
+def test_heading_setpoint_turns_no_faster_than_the_yaw_rate_limit(world):
+    config = QuadrotorConfig()
+    quad = Quadrotor(world.client, config)
+    quad.spawn([0.0, 0.0, 30.0], 0.0)
+    quad.set_position_setpoint([0.0, 0.0, 30.0], math.pi)  # half a turn: the rate setpoint saturates
+    log = _fly(quad, 4.0)
+    t_s = np.arange(1, len(log["yaw"]) + 1) * PHYSICS_DT_S
+    turned = np.abs(np.unwrap(log["yaw"]))  # never ahead of a turn at the limit (+ one physics step's turn)
+    assert np.all(turned <= config.max_yaw_rate_radps * (t_s + PHYSICS_DT_S) + ANGLE_ROUNDING_RAD)
+    assert turned[-1] == pytest.approx(math.pi, abs=YAW_TOLERANCE_RAD)
+
+
+def test_velocity_setpoint_ends_a_position_setpoint(world):
+    quad = Quadrotor(world.client, QuadrotorConfig())
+    quad.spawn([0.0, 0.0, 10.0], 0.0)
+    quad.set_position_setpoint([10.0, 0.0, 10.0], 0.0)
+    _fly(quad, 1.0)
+    quad.set_setpoint([0.0, 0.0, 0.0], 0.0)
+    _fly(quad, 3.0)  # settles into hover, then stays: no pull back to the old setpoint
+    before = quad.read_state().position_m
+    _fly(quad, 1.0)
+    np.testing.assert_allclose(quad.read_state().position_m, before, atol=0.02)
+
+
+@pytest.mark.parametrize("position, yaw", [([0.0, math.nan, 5.0], 0.0), ([0.0, 0.0, 5.0], math.inf)])
+def test_non_finite_position_setpoint_raises_value_error(world, position, yaw):
+    quad = Quadrotor(world.client, QuadrotorConfig())
+    quad.spawn([0.0, 0.0, 10.0], 0.0)
+    with pytest.raises(ValueError, match="position setpoint must be finite"):
+        quad.set_position_setpoint(position, yaw)

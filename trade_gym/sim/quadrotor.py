@@ -1,4 +1,4 @@
-"""Quadrotor airframe in pybullet and its cascaded velocity -> attitude controller.
+"""Quadrotor airframe in pybullet and its cascaded (position ->) velocity -> attitude controller.
 
 Owns the rigid body (a box with mass and inertia), the setpoint limits and the ground-truth DroneState.
 """
@@ -17,9 +17,9 @@ from trade.validation import is_finite_number, is_positive_number, require
 
 FloatArray = npt.NDArray[np.float64]
 _Vec3 = tuple[float, float, float]
-# pybullet's state as read: velocity (3,), row-major R_world_body (9,), body rates (3,) (`_query_reading`); and
-# position, velocity, angular velocity, R_world_body, body rates, specific force (`_sample`)
-_Read = tuple[tuple[float, ...], tuple[float, ...], _Vec3]
+# pybullet's state as read: position (3,), velocity (3,), row-major R_world_body (9,), body rates (3,)
+# (`_query_reading`); and position, velocity, angular velocity, R_world_body, body rates, specific force (`_sample`)
+_Read = tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], _Vec3]
 _Reading = tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, ...], _Vec3, _Vec3]
 
 _BODY_LINK = -1  # pybullet link index of a multibody's base
@@ -27,10 +27,13 @@ _ORIGIN = (0.0, 0.0, 0.0)  # thrust acts at the centre of mass
 _AIRFRAME_RGBA = (0.15, 0.15, 0.15, 1.0)
 _RIGHT_ANGLE_DEG = 90.0
 _MIN_UPRIGHTNESS = 0.5  # floor on world z of body z when dividing by it (tilt is limited far below 60 deg)
+# velocity gain / position gain of a critically damped position -> velocity cascade (k_v^2 = 4 k_v k_p)
+_CRITICAL_CASCADE_GAIN_RATIO = 4.0
 _POSITIVE_FIELDS = (
     "mass_kg", "max_speed_horizontal_mps", "max_speed_vertical_mps", "max_accel_mps2", "max_yaw_rate_radps",
     "velocity_gain_horizontal_per_s", "velocity_gain_vertical_per_s", "attitude_natural_freq_radps",
-    "attitude_damping_ratio", "max_yaw_lead_rad",
+    "attitude_damping_ratio", "max_yaw_lead_rad", "position_gain_horizontal_per_s", "position_gain_vertical_per_s",
+    "yaw_gain_per_s",
 )
 
 
@@ -41,6 +44,10 @@ class QuadrotorConfig:
     Gains: velocity error -> acceleration by `velocity_gain_*_per_s` (first-order time constant
     1/gain); attitude tracked by a PD law with natural frequency `attitude_natural_freq_radps`
     and damping ratio `attitude_damping_ratio` (kR = w^2, kw = 2 zeta w, scaled by the inertia).
+    With a position setpoint (`Quadrotor.set_position_setpoint`, as PX4 offboard holds one), position error ->
+    velocity setpoint by `position_gain_*_per_s` and heading error -> yaw-rate setpoint by `yaw_gain_per_s`, both
+    clipped to the setpoint limits. The position gains default to a quarter of the velocity gains: the cascade
+    e'' + k_v e' + k_v k_p e = 0 is then critically damped (k_v^2 = 4 k_v k_p), so a step does not overshoot.
     """
 
     mass_kg: float = 1.5
@@ -59,6 +66,9 @@ class QuadrotorConfig:
     attitude_natural_freq_radps: float = 25.0
     attitude_damping_ratio: float = 1.0  # critically damped: no tilt overshoot
     max_yaw_lead_rad: float = 0.5  # yaw setpoint may run at most this far ahead of the yaw
+    position_gain_horizontal_per_s: float = velocity_gain_horizontal_per_s / _CRITICAL_CASCADE_GAIN_RATIO
+    position_gain_vertical_per_s: float = velocity_gain_vertical_per_s / _CRITICAL_CASCADE_GAIN_RATIO
+    yaw_gain_per_s: float = 2.0  # heading error -> yaw rate; well below the attitude loop's 25 rad/s
 
     def __post_init__(self) -> None:
         c = "QuadrotorConfig"
@@ -98,7 +108,8 @@ class DroneState:
 
 
 class Quadrotor:
-    """A box-shaped quadrotor flown by velocity (heading frame) and yaw-rate setpoints.
+    """A box-shaped quadrotor flown by velocity (heading frame) and yaw-rate setpoints, or by a position and heading
+    setpoint (world frame) that its position controller turns into those at every physics step.
 
     Per physics step: `physics_step(dt_s)`, then `p.stepSimulation`, then `read_state()`.
     `physics_step` reuses the reading of a `read_state()` made since the last step, and readings between two
@@ -119,6 +130,7 @@ class Quadrotor:
 
     def _reset_internal(self, yaw_rad: float) -> None:
         self._setpoint = (0.0, 0.0, 0.0, 0.0)  # forward, left, up [m/s], yaw rate [rad/s]
+        self._position_sp: tuple[float, float, float, float] | None = None  # x, y, z [m] world, yaw [rad]
         self._yaw_sp = float(yaw_rad)
         self._t_s = 0.0
         self._dt_s = 0.0
@@ -146,11 +158,40 @@ class Quadrotor:
         return body
 
     def set_setpoint(self, velocity_heading_mps: npt.ArrayLike, yaw_rate_radps: float) -> None:
-        """velocity_heading_mps: (3,) forward, left, up in the yaw-only heading frame [m/s]; clipped."""
+        """velocity_heading_mps: (3,) forward, left, up in the yaw-only heading frame [m/s]; clipped. Ends any
+        position setpoint."""
         fwd, left, up = (float(v) for v in np.asarray(velocity_heading_mps, dtype=np.float64).reshape(3))
         rate = float(yaw_rate_radps)
         if not all(math.isfinite(v) for v in (fwd, left, up, rate)):
             raise ValueError(f"setpoint must be finite, got velocity {(fwd, left, up)!r}, yaw rate {rate!r}")
+        self._position_sp = None
+        self._set_clipped(fwd, left, up, rate)
+
+    def set_position_setpoint(self, position_m: npt.ArrayLike, yaw_rad: float) -> None:
+        """Hold `position_m` (3,) world [m] and heading `yaw_rad` [rad] (PX4's offboard position setpoint) until the
+        next setpoint: each physics step sets the velocity setpoint k_p (p_sp - p) (heading frame) and the yaw rate
+        k_yaw wrap(yaw_sp - yaw), clipped to the setpoint limits (`QuadrotorConfig`)."""
+        x, y, z = (float(v) for v in np.asarray(position_m, dtype=np.float64).reshape(3))
+        yaw = float(yaw_rad)
+        if not all(math.isfinite(v) for v in (x, y, z, yaw)):
+            raise ValueError(f"position setpoint must be finite, got position {(x, y, z)!r}, yaw {yaw!r}")
+        self._position_sp = (x, y, z, yaw)
+
+    def _hold_position(self, pos: tuple[float, ...], yaw: float) -> None:
+        """The velocity and yaw-rate setpoints of the position controller at position `pos` (3,) and heading `yaw`."""
+        if self._position_sp is None:
+            return
+        cfg = self.config
+        x, y, z, yaw_sp = self._position_sp
+        kh = cfg.position_gain_horizontal_per_s
+        vx, vy = kh * (x - pos[0]), kh * (y - pos[1])  # world [m/s]
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        # heading frame = Rz(yaw)^T world; the velocity controller rotates it back with the same yaw
+        self._set_clipped(cy * vx + sy * vy, -sy * vx + cy * vy, cfg.position_gain_vertical_per_s * (z - pos[2]),
+                          cfg.yaw_gain_per_s * _wrap(yaw_sp - yaw))
+
+    def _set_clipped(self, fwd: float, left: float, up: float, rate: float) -> None:
+        """The velocity (heading frame) [m/s] and yaw-rate [rad/s] setpoint, clipped to the setpoint limits."""
         cfg = self.config
         horizontal = math.hypot(fwd, left)
         if horizontal > cfg.max_speed_horizontal_mps:  # clip the horizontal norm, keep the direction
@@ -166,9 +207,10 @@ class Quadrotor:
             raise RuntimeError("Quadrotor.physics_step called before spawn()")
         c, b, cfg = self.client_id, self.body_id, self.config
         # the reading of a read_state() since the last step (same pybullet state), else a fresh one
-        vel, m, w_body = self._last_read or self._query_reading()
+        pos, vel, m, w_body = self._last_read or self._query_reading()
         self._last_read = None
         yaw = math.atan2(m[3], m[0])
+        self._hold_position(pos, yaw)
         f = self._desired_specific_thrust(yaw, vel)
         rate_sp = self._setpoint[3]
         self._advance_yaw_setpoint(yaw, rate_sp, dt_s)
@@ -184,12 +226,13 @@ class Quadrotor:
         self._t_s += float(dt_s)
 
     def _query_reading(self) -> _Read:
-        """(velocity (3,) world [m/s], row-major R_world_body (9,), body rates (3,) [rad/s]) from pybullet."""
+        """(position (3,) world [m], velocity (3,) world [m/s], row-major R_world_body (9,), body rates (3,) [rad/s])
+        from pybullet."""
         c, b = self.client_id, self.body_id
-        _, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
+        pos, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
         vel, omega_w = p.getBaseVelocity(b, physicsClientId=c)
         m = p.getMatrixFromQuaternion(quat, physicsClientId=c)  # row-major R_world_body
-        return vel, m, _body_rates(m, omega_w)
+        return pos, vel, m, _body_rates(m, omega_w)
 
     def _advance_yaw_setpoint(self, yaw: float, rate_sp: float, dt_s: float) -> None:
         """Yaw setpoint psi_d += r dt [rad], kept within max_yaw_lead of the current `yaw`."""
@@ -278,14 +321,14 @@ class Quadrotor:
             raise RuntimeError("Quadrotor state read before spawn()")
         if self._reading is not None:  # no step since: the same state
             pos, vel, w, m, w_body, f_body = self._reading
-            self._last_read = (vel, m, w_body)
+            self._last_read = (pos, vel, m, w_body)
             return self._reading
         c, b = self.client_id, self.body_id
         pos, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
         vel, w = p.getBaseVelocity(b, physicsClientId=c)
         m = p.getMatrixFromQuaternion(quat, physicsClientId=c)  # row-major R_world_body
         w_body = _body_rates(m, w)
-        self._last_read = (vel, m, w_body)
+        self._last_read = (pos, vel, m, w_body)
         if self._m_pre is None:  # nothing stepped yet: at rest
             ax = ay = az = 0.0
             mp = m
