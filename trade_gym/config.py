@@ -11,6 +11,7 @@ from typing import Any
 
 from trade.validation import (check_choice, check_non_negative, check_positive, check_range, is_int_at_least,
                              nested_config, require)
+from trade_gym.action import ACTION_MODES, WaypointScale
 from trade_gym.perception.oracle import OracleConfig
 from trade_gym.reward import RewardConfig
 from trade_gym.sim.appearance import APPEARANCE_MODES
@@ -29,7 +30,8 @@ SCENE_NAMES = ("desert", "city", "mountain")
 LATENCY_MODES = ("none", "fixed", "measured")
 MS_PER_S = 1000.0
 # EnvConfig's fields that hold a component's whole config (given as the config or a mapping of its fields)
-NESTED_CONFIGS = {"reward": RewardConfig, "quadrotor": QuadrotorConfig, "vio": VioConfig}
+NESTED_CONFIGS = {"reward": RewardConfig, "quadrotor": QuadrotorConfig, "vio": VioConfig,
+                  "waypoint_scale": WaypointScale}
 ORACLE_PREFIX = "oracle_"  # EnvConfig's oracle_<name> is OracleConfig's <name>
 # The settings `reset(options=...)` may set for one episode (`EnvConfig.for_episode`): the scene and the scenario.
 # Each reset builds its world from them; nothing the env builds at construction depends on them.
@@ -98,12 +100,18 @@ class EnvConfig:
     # compute time for that frame: not deterministic). perception_latency_ms only with "fixed" [ms].
     perception_latency: str = "none"
     perception_latency_ms: float | None = None
+    # What the action sets (`trade_gym.action`): "velocity" (velocity and yaw-rate setpoints, heading frame) or
+    # "waypoint" (a position and heading offset from the drone, held by the quadrotor's position controller as a PX4
+    # offboard position setpoint; scaled by `waypoint_scale`, unused in velocity mode).
+    action_mode: str = "velocity"
     # Components' configs, each a config or a mapping of its fields (NESTED_CONFIGS): the reward's weights
-    # (`trade_gym.reward`); the airframe, setpoint limits (the action scale, `trade_gym.action`) and controller
-    # gains; the VIO pose drift (pose_source="vio").
+    # (`trade_gym.reward`); the airframe, setpoint limits (the velocity action's scale, `trade_gym.action`) and
+    # controller gains (velocity, attitude, position); the VIO pose drift (pose_source="vio"); the waypoint action's
+    # scale (action_mode="waypoint").
     reward: RewardConfig = field(default_factory=RewardConfig)
     quadrotor: QuadrotorConfig = field(default_factory=QuadrotorConfig)
     vio: VioConfig = field(default_factory=VioConfig)
+    waypoint_scale: WaypointScale = field(default_factory=WaypointScale)
 
     def __post_init__(self) -> None:
         for name, config_type in NESTED_CONFIGS.items():
@@ -116,6 +124,7 @@ class EnvConfig:
         check_choice("appearance", self.appearance, APPEARANCE_MODES)
         check_choice("render_mode", self.render_mode, RENDER_MODES)
         check_choice("renderer", self.renderer, RENDERERS)
+        check_choice("action_mode", self.action_mode, ACTION_MODES)
         _check_latency(self.perception_latency, self.perception_latency_ms)
         require(is_int_at_least(self.camera_size, MIN_CAMERA_SIZE_PX, numpy_ints=False), "camera_size",
                 self.camera_size, f"an integer >= {MIN_CAMERA_SIZE_PX} [px]")

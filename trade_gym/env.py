@@ -1,7 +1,7 @@
 """TradeFollow-v0: follow a ground vehicle from a quadrotor with a downward camera.
 
 The env owns one pybullet client and wires sim -> sensors -> perception -> observation;
-the policy's action flows back as a velocity setpoint. Perception sees the sensors only; the env scores its
+the policy's action flows back as a velocity setpoint (or, in waypoint mode, a position setpoint). Perception sees the sensors only; the env scores its
 estimates against ground truth (`trade_gym.scoring`).
 """
 
@@ -18,7 +18,7 @@ import numpy as np
 import pybullet as p
 
 from trade.geometry import Pose
-from trade_gym.action import ACTION_DIM, ActionScale, action_space, clip_action
+from trade_gym.action import ACTION_DIM, ActionScale, action_space, clip_action, waypoint_setpoint
 from trade_gym.annotate import annotate_frame
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.faults import SensorFilter
@@ -47,7 +47,7 @@ class TradeFollowEnv(gym.Env):
     A pybullet world (desert, city or mountain; seeded, procedural) holds a target vehicle that
     drives along a spline, identical decoys, terrain and buildings. A quadrotor carries a
     body-fixed camera (110 deg FOV, 30 Hz) and an IMU (200 Hz). Each step is one camera frame:
-    the action sets a velocity setpoint for 1/30 s of 240 Hz physics, the camera renders, and the
+    the action sets a velocity (or position) setpoint for 1/30 s of 240 Hz physics, the camera renders, and the
     perception mode (`trade`, `dcf` or `oracle`) estimates the target. With `perception_latency` the estimate
     of a frame reaches the observation later (see Perception Latency).
 
@@ -55,8 +55,14 @@ class TradeFollowEnv(gym.Env):
     `Box(-1, 1, (4,), float32)`: forward, left and up velocity in the drone's heading frame and
     yaw rate, scaled by the quadrotor's setpoint limits (`trade_gym.action`, `env.action_scale`; by default
     8 m/s horizontal, 3 m/s vertical, 1.5 rad/s; `quadrotor=` sets them).
-    Values beyond the bounds act as the bound; a wrong shape or a non-finite value raises
-    `ValueError`.
+    With `action_mode="waypoint"` the same Box is a position setpoint as PX4 offboard takes one: forward, left and up
+    offsets from the drone in its heading frame when the action arrives, scaled by `waypoint_scale` (`WaypointScale`;
+    by default 20 m, 5 m), and a heading offset (by default pi/2 rad). The env adds them to the drone's position and
+    heading at that moment and the quadrotor's position controller holds that absolute point and heading (PX4's
+    yaw is an absolute heading; it is relative here because the observation has none) until the next action:
+    velocity setpoint k_p (p_sp - p), yaw rate k_yaw (psi_sp - psi), clipped to the limits above (`QuadrotorConfig`).
+    A zero action holds the drone where it is. In both modes values beyond the bounds act as the bound; a wrong
+    shape or a non-finite value raises `ValueError`.
 
     ## Observation Space
     | key | shape | bounds | meaning |
@@ -124,9 +130,9 @@ class TradeFollowEnv(gym.Env):
     ## Arguments
     All fields of `trade_gym.config.EnvConfig`, e.g. `scene`, `perception`, `pose_source`,
     `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches,
-    `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0), and
-    the components' configs `reward=`, `quadrotor=` and `vio=` (each the config or a mapping of its fields), `decoys`,
-    `target_motion`, `appearance`, `renderer`.
+    `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0),
+    `action_mode` ("velocity", "waypoint"), the components' configs `reward=`, `quadrotor=`, `vio=` and
+    `waypoint_scale=` (each the config or a mapping of its fields), `decoys`, `target_motion`, `appearance`, `renderer`.
 
     ## Version History
     - v0: initial release.
@@ -149,6 +155,7 @@ class TradeFollowEnv(gym.Env):
     - v0, issue 41: the reward's `distance` is measured mostly in following-band distances (`RewardConfig`).
     - v0, issue 41: `reset(options={...})` sets `decoys`, `target_motion` and `appearance` for that episode only.
     - v0, issue 44: `reset(options={...})` sets the `scene` too (a wrapper above the env can draw it per episode).
+    - v0, issue 45: `action_mode` ("velocity", the default and as before; "waypoint") and `waypoint_scale`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -163,8 +170,11 @@ class TradeFollowEnv(gym.Env):
         self.imu_config = ImuConfig(noise=self.config.imu_noise)
         self.action_space = action_space()
         self.observation_space = observation_space()
-        self.action_scale = ActionScale.of(self.quad_config)  # what followers divide their setpoints by
-        self._action_scale = self.action_scale.per_component()
+        # what followers divide their setpoints by: velocities (action_mode "velocity"), or offsets ("waypoint")
+        self.action_scale = ActionScale.of(self.quad_config)
+        self.waypoint_scale = self.config.waypoint_scale
+        self._waypoint_mode = self.config.action_mode == "waypoint"
+        self._action_scale = (self.waypoint_scale if self._waypoint_mode else self.action_scale).per_component()
         self._client: int | None = p.connect(p.DIRECT)
         self.camera = Camera(self._client, self.camera_config)
         self._T_cam_body = self.camera.T_body_cam.inverse()
@@ -342,8 +352,13 @@ class TradeFollowEnv(gym.Env):
 
     def _advance(self, action: list[float]) -> bool:
         """Run one camera frame of physics under the action; True if the drone crashed."""
-        fwd, left, up, yaw_rate = (a * s for a, s in zip(action, self._action_scale))
-        self.quadrotor.set_setpoint((fwd, left, up), yaw_rate)
+        if self._waypoint_mode:  # offsets from the drone now, in its heading frame now
+            offset = [a * s for a, s in zip(action, self._action_scale)]
+            state = self._state
+            self.quadrotor.set_position_setpoint(*waypoint_setpoint(offset, state.position_m.tolist(), state.yaw_rad))
+        else:
+            fwd, left, up, yaw_rate = (a * s for a, s in zip(action, self._action_scale))
+            self.quadrotor.set_setpoint((fwd, left, up), yaw_rate)
         dt = 1.0 / PHYSICS_RATE_HZ
         previous = self._state.position_m.tolist()
         quadrotor = self.quadrotor
