@@ -1,0 +1,127 @@
+"""The paper's real-flight follower: waypoints that keep altitude and yaw and centre the target, for action_mode="waypoint".
+
+TRADE's Voxl 2 flight sent PX4 waypoints from the Kalman filter's 3D location of the target: the drone's altitude and
+yaw, plus a horizontal offset that keeps the object centred in the camera's view. It sees only the observation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from trade.validation import is_finite_number, is_positive_number, require
+from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, DEFAULT_WAYPOINT_SCALE
+from trade_gym.config import CAMERA_PITCH_RANGE_DEG, EnvConfig
+from trade_gym.sim.quadrotor import QuadrotorConfig
+
+WAYPOINT_MODE = "waypoint"  # the env's action_mode this follower flies
+
+
+@dataclass(frozen=True)
+class WaypointFollowerConfig:
+    """Camera pitch [deg], the target's lead time [s], the box servo's offset [m] and the env's waypoint scale [m].
+
+    `lead_time_s`: the waypoint is the filter's location of the target predicted this far ahead (p + v t, both from
+    the observation). The position controller flies k_p times the offset, so a waypoint on the target's current
+    location trails a target driving at v by v / k_p (6 m at the desert's 3 m/s); predicting 1 / k_p ahead cancels
+    that lag. 0 sends the current filtered location, as the paper states it.
+    `image_offset_m`: before the first 3D estimate, the waypoint per half-image offset of the box centre (image up is
+    forward, image right is right): 12 m flies the box towards the centre at up to 6 m/s at the default gain, as the
+    scripted follower's image servo does, and gives TRADE's triangulation its baseline.
+    """
+
+    camera_pitch_deg: float = EnvConfig.camera_pitch_deg  # must match the env's
+    lead_time_s: float = 1.0 / QuadrotorConfig.position_gain_horizontal_per_s
+    image_offset_m: float = 12.0
+    # the env's waypoint scale (`env.waypoint_scale`) [m per unit action]
+    max_offset_horizontal_m: float = DEFAULT_WAYPOINT_SCALE.max_offset_horizontal_m
+
+    def __post_init__(self) -> None:
+        c = "WaypointFollowerConfig"
+        for name in ("image_offset_m", "max_offset_horizontal_m"):
+            require(is_positive_number(getattr(self, name)), f"{c}.{name}", getattr(self, name), "a finite number > 0")
+        require(is_finite_number(self.lead_time_s) and self.lead_time_s >= 0.0, f"{c}.lead_time_s", self.lead_time_s,
+                "a finite number >= 0 [s]")
+        low, high = CAMERA_PITCH_RANGE_DEG
+        require(is_finite_number(self.camera_pitch_deg) and low <= self.camera_pitch_deg <= high,
+                f"{c}.camera_pitch_deg", self.camera_pitch_deg, f"in [{low}, {high}] (the env's range)")
+
+    @classmethod
+    def of(cls, config: EnvConfig) -> WaypointFollowerConfig:
+        """The follower's settings for an env built with `config`: its camera pitch, waypoint scale and position
+        gain. ValueError unless the env flies waypoints (`action_mode="waypoint"`)."""
+        if config.action_mode != WAYPOINT_MODE:
+            raise ValueError(f"WaypointFollower sends position setpoints and needs an env with "
+                             f"action_mode={WAYPOINT_MODE!r}, got action_mode={config.action_mode!r}")
+        return cls(camera_pitch_deg=config.camera_pitch_deg,
+                   lead_time_s=1.0 / config.quadrotor.position_gain_horizontal_per_s,
+                   max_offset_horizontal_m=config.waypoint_scale.max_offset_horizontal_m)
+
+
+class WaypointFollower:
+    """`predict(obs) -> (action, state)` for `gym.make("TradeFollow-v0", action_mode="waypoint")`; one observation or
+    a batch (leading axis). The action is (forward, left, 0, 0) over the waypoint scale: the altitude and the yaw stay
+    where they are, the horizontal offset puts the drone where the camera's optical axis meets the target.
+
+    With a 3D estimate (`target_pos_rel_m` not zero) the offset is rel + lead_time v - (h / tan(pitch), 0), h = -rel_z
+    the height above the target. Before one, it servos the box towards the image centre (`image_offset_m`); with no
+    box either, it holds position (a zero action). On a velocity-mode env these actions would be read as velocities:
+    build it with `WaypointFollower.for_env(env)`, which refuses one.
+    """
+
+    def __init__(self, config: WaypointFollowerConfig | None = None) -> None:
+        self.config = config or WaypointFollowerConfig()
+
+    @classmethod
+    def for_env(cls, env: gym.Env) -> WaypointFollower:
+        """A follower set up for `env` (a TradeFollow-v0, wrapped or not); ValueError unless it flies waypoints."""
+        config = getattr(env.unwrapped, "config", None)
+        if not isinstance(config, EnvConfig):
+            raise ValueError(f"WaypointFollower.for_env needs a TradeFollow-v0 env, got {env!r}")
+        return cls(WaypointFollowerConfig.of(config))
+
+    def reset(self) -> None:
+        """Nothing to reset: every action depends on its observation alone (kept for the followers' common API)."""
+
+    def predict(
+        self,
+        observation: dict[str, np.ndarray],
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
+        rel = np.asarray(observation["target_pos_rel_m"], dtype=np.float64)
+        batched = rel.ndim == 2
+        rel = rel.reshape(-1, 3)
+        vel = np.asarray(observation["target_vel_mps"], dtype=np.float64).reshape(-1, 3)
+        bbox = np.asarray(observation["bbox_norm"], dtype=np.float64).reshape(-1, 4)
+        offsets = np.stack([self._centre_on_target(r, v) if np.any(r != 0.0) else self._servo_image(b)
+                            for r, v, b in zip(rel, vel, bbox)])
+        action = np.zeros((len(rel), ACTION_DIM), np.float32)  # up and yaw stay 0: keep altitude and yaw
+        action[:, :2] = self._scaled(offsets)
+        return (action if batched else action[0]), state
+
+    def _centre_on_target(self, rel: np.ndarray, vel: np.ndarray) -> np.ndarray:
+        """(forward, left) [m]: to where the optical axis meets the target predicted `lead_time_s` ahead."""
+        cfg = self.config
+        height_m = max(-rel[2], 0.0)
+        ahead_m = height_m / math.tan(math.radians(cfg.camera_pitch_deg))
+        return rel[:2] + cfg.lead_time_s * vel[:2] - np.array([ahead_m, 0.0])
+
+    def _servo_image(self, bbox_norm: np.ndarray) -> np.ndarray:
+        """(forward, left) [m] towards the box centre (none without a box: hold position)."""
+        if not np.any(bbox_norm):
+            return np.zeros(2)
+        right, down = 2.0 * (bbox_norm[:2] - 0.5)  # half-image units
+        return -self.config.image_offset_m * np.array([down, right])
+
+    def _scaled(self, offsets: np.ndarray) -> np.ndarray:
+        """(N, 2) offsets [m] as actions: over the waypoint scale, the horizontal norm clipped to 1 (direction kept)."""
+        unit = offsets / self.config.max_offset_horizontal_m
+        norm = np.linalg.norm(unit, axis=1, keepdims=True)
+        unit = unit / np.maximum(norm, ACTION_HIGH)
+        return np.clip(unit, ACTION_LOW, ACTION_HIGH)

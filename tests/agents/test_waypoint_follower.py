@@ -1,0 +1,100 @@
+"""The paper's real-flight follower: waypoints that keep altitude and yaw and centre the target (action_mode="waypoint")."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from trade_gym.agents import WaypointFollower, WaypointFollowerConfig
+from trade_gym.config import EnvConfig
+from trade_gym.env import TradeFollowEnv
+from trade_gym.rollout import fly_episode
+
+MIN_VISIBLE_FRACTION = 0.95
+EPISODE_STEPS = 900  # the full 30 s
+
+
+def _obs(rel=(0.0, 0.0, 0.0), vel=(0.0, 0.0, 0.0), bbox=(0.0, 0.0, 0.0, 0.0)) -> dict[str, np.ndarray]:
+    return {"target_pos_rel_m": np.array(rel, np.float32), "target_vel_mps": np.array(vel, np.float32),
+            "bbox_norm": np.array(bbox, np.float32)}
+
+
+@pytest.mark.parametrize("scene", ["desert", "mountain"])
+def test_waypoint_follower_keeps_the_target_in_view_a_full_episode_without_crashing(scene):
+    env = TradeFollowEnv(scene=scene, perception="oracle", camera_size=64, action_mode="waypoint")
+    try:
+        infos = fly_episode(env, WaypointFollower.for_env(env), seed=0)
+    finally:
+        env.close()
+    assert len(infos) == EPISODE_STEPS  # neither crashed nor lost
+    assert not any(i["crashed"] for i in infos)
+    visible = np.mean([i["target_visible"] for i in infos])
+    assert visible >= MIN_VISIBLE_FRACTION, f"{scene}: target visible in {visible:.3f} of frames"
+
+
+def test_for_env_refuses_a_velocity_mode_env_naming_the_mode():
+    env = TradeFollowEnv(scene="city", perception="oracle", camera_size=32)
+    try:
+        with pytest.raises(ValueError, match="needs an env with action_mode='waypoint', got action_mode='velocity'"):
+            WaypointFollower.for_env(env)
+    finally:
+        env.close()
+
+
+def test_config_of_an_env_takes_its_pitch_scale_and_position_gain():
+    config = EnvConfig(action_mode="waypoint", camera_pitch_deg=45.0, waypoint_scale={"max_offset_horizontal_m": 10.0},
+                       quadrotor={"position_gain_horizontal_per_s": 0.25})
+    follower = WaypointFollowerConfig.of(config)
+    assert (follower.camera_pitch_deg, follower.max_offset_horizontal_m, follower.lead_time_s) == (45.0, 10.0, 4.0)
+    assert WaypointFollowerConfig.of(EnvConfig(action_mode="waypoint")) == WaypointFollowerConfig()
+
+
+def test_target_under_the_optical_axis_and_standing_still_gives_a_zero_action():
+    straight_down = WaypointFollower()  # pitch 90 deg: the axis meets the ground below the drone
+    action, _ = straight_down.predict(_obs(rel=(0.0, 0.0, -16.0)))
+    np.testing.assert_allclose(action, np.zeros(4), atol=1e-6)  # 16 m / tan(90 deg) is 1e-15 m, not 0
+    pitched = WaypointFollower(WaypointFollowerConfig(camera_pitch_deg=45.0))  # the axis meets it 16 m ahead
+    action, _ = pitched.predict(_obs(rel=(16.0, 0.0, -16.0)))
+    np.testing.assert_allclose(action, np.zeros(4), atol=1e-6)
+
+
+def test_offset_is_the_target_predicted_lead_time_ahead_minus_the_axis_offset_with_altitude_and_yaw_kept():
+    config = WaypointFollowerConfig(camera_pitch_deg=45.0, lead_time_s=2.0, max_offset_horizontal_m=20.0)
+    action, _ = WaypointFollower(config).predict(_obs(rel=(20.0, -3.0, -10.0), vel=(1.5, 0.5, 0.2)))
+    forward_m, left_m = 20.0 + 2.0 * 1.5 - 10.0, -3.0 + 2.0 * 0.5
+    np.testing.assert_allclose(action, [forward_m / 20.0, left_m / 20.0, 0.0, 0.0], rtol=1e-6)
+
+
+def test_far_target_clips_the_horizontal_offset_keeping_its_direction():
+    action, _ = WaypointFollower().predict(_obs(rel=(300.0, -400.0, -16.0)))
+    assert math.hypot(action[0], action[1]) == pytest.approx(1.0)
+    assert action[0] / action[1] == pytest.approx(300.0 / -400.0)
+
+
+def test_before_a_3d_estimate_it_servos_towards_the_box_and_without_one_holds_position():
+    follower = WaypointFollower()
+    action, _ = follower.predict(_obs(bbox=(0.8, 0.3, 0.05, 0.1)))  # right of and above the centre
+    assert action[0] > 0 and action[1] < 0 and action[2] == 0 and action[3] == 0  # forward and right
+    np.testing.assert_allclose(action[:2] * follower.config.max_offset_horizontal_m,
+                               [follower.config.image_offset_m * 0.4, -follower.config.image_offset_m * 0.6], rtol=1e-6)
+    action, _ = follower.predict(_obs())
+    np.testing.assert_array_equal(action, np.zeros(4, np.float32))
+
+
+def test_batch_and_single_observations_agree():
+    observations = [_obs(rel=(3.0, -2.0, -16.0), vel=(2.0, 0.5, 0.0)), _obs(bbox=(0.6, 0.4, 0.05, 0.1)), _obs()]
+    follower = WaypointFollower()
+    batch, _ = follower.predict({k: np.stack([o[k] for o in observations]) for k in observations[0]})
+    assert batch.shape == (3, 4) and batch.dtype == np.float32
+    for row, observation in zip(batch, observations):
+        np.testing.assert_array_equal(row, follower.predict(observation)[0])
+
+
+@pytest.mark.parametrize("bad", [{"lead_time_s": -1.0}, {"image_offset_m": 0.0}, {"camera_pitch_deg": 10.0},
+                                 {"max_offset_horizontal_m": math.nan}])
+def test_bad_follower_setting_raises_naming_it(bad):
+    (name,) = bad
+    with pytest.raises(ValueError, match=f"WaypointFollowerConfig.{name} must be"):
+        WaypointFollowerConfig(**bad)
