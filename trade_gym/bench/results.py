@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from trade_gym.bench.policies import policy_env_kwargs
 from trade_gym.bench.runner import RunResult, RunSeries, RunTiming
 from trade_gym.bench.suites import RunSpec
 from trade_gym.bench.summary import metric_values, spec_record
@@ -175,8 +176,8 @@ def write_series(path: Path, results: Sequence[RunResult]) -> None:
 
 def _spec_of(run: dict[str, Any]) -> RunSpec:
     switches = tuple(run["switches"].items())
-    extra = tuple((k, v) for k, v in run["env_kwargs"].items()
-                  if k not in RunSpec.OWN_ENV_KEYS and k not in run["switches"])
+    own = (*RunSpec.OWN_ENV_KEYS, *policy_env_kwargs(run["policy"]))  # what the spec sets from its own fields
+    extra = tuple((k, v) for k, v in run["env_kwargs"].items() if k not in own and k not in run["switches"])
     return RunSpec(run["group"], run["kind"], run["scene"], run["policy"], run["perception"], run["pose_source"],
                    run["seed"], run["steps_requested"], run["camera_size"], switches, extra, run["depth_kind"])
 

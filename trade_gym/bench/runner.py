@@ -126,7 +126,7 @@ def fly(spec: RunSpec, on_frame: FrameHook | None = None,
     try:
         if record_root is not None:
             env = _recording(base, record_root / spec.run_id)
-        policy = make_policy(spec.policy, spec.seed, base.config.camera_pitch_deg, base.action_scale)
+        policy = make_policy(spec.policy, spec.seed, base.config.camera_pitch_deg, base.action_scale, base.config)
         reset_start = time.perf_counter()
         infos = fly_episode(env, policy, spec.seed, spec.steps, on_reset=reset_done, on_step=on_frame)
         loop_s = time.perf_counter() - loop_start[0]

@@ -10,6 +10,7 @@ import itertools
 from dataclasses import dataclass, fields
 from typing import Any
 
+from trade_gym.bench.policies import policy_env_kwargs
 from trade_gym.bench.splits import DEVELOPMENT, EVALUATION, TRAINING
 from trade_gym.config import APPEARANCE_MODES, CAMERA_RATE_HZ, SCENE_NAMES, TARGET_MOTIONS, EnvConfig
 
@@ -86,7 +87,8 @@ class RunSpec:
         fixed = dict(self.extra).get("world_seed", dict(self.switches).get("world_seed"))
         return self.seed if fixed is None else int(fixed)
 
-    # env keyword arguments every spec sets itself; the rest of `env_kwargs` is its extras and switches
+    # env keyword arguments every spec sets itself (and its policy's, `policy_env_kwargs`); the rest of `env_kwargs`
+    # is its extras and switches
     OWN_ENV_KEYS = ("scene", "perception", "pose_source", "camera_size", "episode_duration_s")
 
     def env_kwargs(self) -> dict[str, Any]:
@@ -97,6 +99,7 @@ class RunSpec:
             "pose_source": self.pose_source,
             "camera_size": self.camera_size,
             "episode_duration_s": self.steps / CAMERA_RATE_HZ,
+            **policy_env_kwargs(self.policy),
             **dict(self.extra),
             **dict(self.switches),
         }
@@ -268,7 +271,7 @@ SUITES: dict[str, tuple[GroupSpec, ...]] = {
     "unseen-depth": _depth_finder_groups(DEPTH_FINDER_STEPS, PAPER_CAMERA_PX),
     "full": _paper_groups(FULL_STEPS, PAPER_CAMERA_PX) + (
         GroupSpec("policies", "follow", "Followers on oracle and TRADE perception",
-                  ALL_SCENES, ("scripted", "learned", "hover", "random"), ("oracle", "trade"), ("gt",),
+                  ALL_SCENES, ("scripted", "learned", "waypoint", "hover", "random"), ("oracle", "trade"), ("gt",),
                   TRACKING_RUNS, FULL_STEPS, PAPER_CAMERA_PX),
     ),
 }
