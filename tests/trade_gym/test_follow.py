@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from trade_gym.agents import ScriptedFollower
+from trade_gym.agents.scripted import ScriptedFollowerConfig
+from trade_gym.config import CAMERA_RATE_HZ
 from trade_gym.rollout import run_episode
 
 MIN_VISIBLE_FRACTION = 0.95
@@ -48,3 +52,38 @@ def test_scripted_follower_without_3d_estimate_servos_towards_the_box():
     action, _ = policy.predict(obs, episode_start=np.array([True]))
     assert action[0] > 0 and action[1] < 0  # forward (image up) and right (image right)
     assert action[2] == 0 and action[3] == 0
+
+
+def _unfixed(bbox_centre: tuple[float, float]) -> dict[str, np.ndarray]:
+    return {"target_pos_rel_m": np.zeros(3, np.float32), "target_vel_mps": np.zeros(3, np.float32),
+            "bbox_norm": np.array([*bbox_centre, 0.05, 0.1], np.float32)}
+
+
+def test_image_servo_setpoint_changes_at_most_the_acceleration_limit_per_frame():
+    config = ScriptedFollowerConfig()
+    policy = ScriptedFollower(config)
+    obs = _unfixed((1.0, 0.5))  # the box at the image's right edge: full-speed right wanted
+    speeds = [float(np.linalg.norm(policy.predict(obs, episode_start=np.array([k == 0]))[0][:2])) for k in range(10)]
+    step_mps = config.image_max_accel_mps2 / CAMERA_RATE_HZ
+    np.testing.assert_allclose(np.array(speeds) * config.max_speed_horizontal_mps,
+                               step_mps * np.arange(1, 11), rtol=1e-5)
+
+
+def test_image_servo_integral_grows_with_a_constant_offset_and_restarts_with_the_episode():
+    config = ScriptedFollowerConfig(image_max_accel_mps2=math.inf)
+    policy = ScriptedFollower(config)
+    obs = _unfixed((0.6, 0.5))  # 0.2 half-images right
+    left = [float(policy.predict(obs, episode_start=np.array([k == 0]))[0][1]) for k in range(30)]
+    proportional = -config.image_gain_mps * 0.2 / config.max_speed_horizontal_mps
+    assert left[0] == pytest.approx(proportional - config.image_integral_gain_mps_per_s * 0.2 / CAMERA_RATE_HZ
+                                    / config.max_speed_horizontal_mps, rel=1e-5)
+    assert np.all(np.diff(left) < 0)  # ever faster to the right while the box stays off-centre
+    again = float(policy.predict(obs, episode_start=np.array([True]))[0][1])
+    assert again == pytest.approx(left[0], rel=1e-6)
+
+
+@pytest.mark.parametrize("kwargs, field", [({"image_max_accel_mps2": 0.0}, "image_max_accel_mps2"),
+                                           ({"image_integral_gain_mps_per_s": -1.0}, "image_integral_gain")])
+def test_bad_image_servo_setting_raises_naming_it(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        ScriptedFollowerConfig(**kwargs)
