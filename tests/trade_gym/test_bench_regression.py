@@ -14,6 +14,7 @@ import pytest
 
 from trade_gym.bench import cli, reference
 from trade_gym.bench.policies import available_policies
+from trade_gym.bench.results import simd_meta
 from trade_gym.bench.runner import RunResult, RunTiming, run_all
 from trade_gym.bench.suites import Selection, expand_suite
 from trade_gym.metrics import METRIC_NAMES
@@ -259,3 +260,15 @@ def test_git_commit_marks_changed_tracked_files_dirty_and_ignores_untracked_ones
     (repo / "code.py").write_text("x = 4\n")
     assert git_commit(repo) == head + "+dirty"
     assert git_commit(tmp_path / "absent") == "unknown"
+
+
+def test_reference_records_the_simd_paths_and_a_check_on_other_paths_notes_it(repo, ref, tmp_path):
+    target = tmp_path / "ref.json"
+    reference.write_reference(_recorded_results(ref), target)
+    written = reference.load_reference(target)
+    assert written["simd"] == simd_meta()
+    assert reference.check_against_reference(_recorded_results(ref), written).simd_note is None  # same machine
+    other = {"cpu_vector_isa": "AVX2", "simd_dispatch": {"numpy": "X86_V3", "opencv": "AVX2"}}
+    note = reference.simd_note(other, simd_meta())
+    assert note is not None and "numpy X86_V3, opencv AVX2 (AVX2)" in note and "Reproducibility" in note
+    assert reference.simd_note(None) is None  # a reference from before the paths were recorded

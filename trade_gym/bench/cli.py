@@ -349,6 +349,8 @@ def _reference_steps(args: argparse.Namespace, results: list[RunResult], filtere
     if args.check_reference is not None:
         check = reference.check_against_reference(results, reference.load_reference(args.check_reference), filtered)
         print(check.summary_line(), file=sys.stderr)
+        if check.simd_note is not None:
+            print(check.simd_note, file=sys.stderr)
         for line in check.problems:
             print(f"  {line}", file=sys.stderr)
         if check.problems:

@@ -3,9 +3,12 @@ new run reproduces every one of them, in either direction, within a stated float
 
 The rule (`TOLERANCES`): counts and flags (steps, frames, decoy switches, crashed) must match exactly; every
 other metric may differ from the reference by at most FLOAT_ABS_TOL + FLOAT_REL_TOL x |reference|. Why so
-tight: on one machine the runs are bit-identical, so any difference is a change in behaviour; across CPUs
-and library builds float results drift in the last digits (~1e-15 relative seen so far), and 1e-6 leaves
-ample room for that while one frame scored differently moves a fraction of a 150-300-frame run by >= 3e-3.
+tight: on one machine the runs are bit-identical, so any difference is a change in behaviour; across CPUs that
+take the same SIMD paths float results drift in the last digits (~1e-15 relative seen so far), and 1e-6 leaves
+ample room for that while one frame scored differently moves a fraction of a 150-300-frame run by >= 3e-3. Across
+SIMD paths the closed loop does not reproduce: with numpy's AVX-512 dispatch turned off, one TRADE run of the
+suite differed by 0.19 m in ground RMSE (benchmarks/results/simd_paths.json, docs/benchmark.md). The reference
+therefore records the SIMD paths it was measured on (`simd_meta`), and a check on other paths says so.
 A change is a failure whether it is better or worse: an improvement is re-recorded on purpose, with its
 numbers in the commit message. The check also fails on a run of the suite missing from the reference, a
 reference run missing from the results (unless the suite was filtered), a run that failed, and a metric
@@ -27,7 +30,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from trade_gym.bench.results import to_json_safe
+from trade_gym.bench.results import simd_meta, to_json_safe
 from trade_gym.bench.runner import RunResult
 from trade_gym.provenance import git_head, tracked_changes
 
@@ -119,6 +122,7 @@ def reference_document(results: Sequence[RunResult]) -> dict[str, Any]:
                  + REGENERATE_COMMAND,
         "commit": clean_commit(),
         "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "simd": simd_meta(),
         "runs": {r.spec.run_id: {"steps_requested": r.spec.steps, "camera_size": r.spec.camera_size,
                                  "metrics": dict(r.metrics)} for r in results if r.error is None},
     }
@@ -176,6 +180,8 @@ class ReferenceCheck:
     compared: int  # runs whose metrics were compared (all present, same length and camera, no error)
     reference_runs: int  # runs in the reference
     filtered: bool  # only a part of the suite was run, so reference runs without a result were not required
+    # set when the reference was measured on other SIMD paths than this machine's (`simd_note`)
+    simd_note: str | None = None
 
     def summary_line(self) -> str:
         scope = " (suite filtered)" if self.filtered else ""
@@ -215,4 +221,17 @@ def check_against_reference(results: Sequence[RunResult], reference: dict[str, A
     if not filtered:
         present = {r.spec.run_id for r in results}
         problems += [f"{run_id}: in the reference, not in the results" for run_id in runs if run_id not in present]
-    return ReferenceCheck(tuple(problems), compared, len(runs), filtered)
+    return ReferenceCheck(tuple(problems), compared, len(runs), filtered, simd_note(reference.get("simd")))
+
+
+def simd_note(recorded: dict[str, Any] | None, current: dict[str, Any] | None = None) -> str | None:
+    """A note when the reference's SIMD paths (`simd_meta` at recording; None in an older reference) differ from
+    this machine's: its closed-loop runs are then not expected to reproduce to float tolerance."""
+    current = simd_meta() if current is None else current
+    if recorded is None or recorded.get("simd_dispatch") == current["simd_dispatch"]:
+        return None
+    def paths(meta: dict[str, Any]) -> str:
+        return ", ".join(f"{lib} {path}" for lib, path in meta["simd_dispatch"].items())
+    return (f"note: the reference was measured with {paths(recorded)} ({recorded.get('cpu_vector_isa')}); this "
+            f"machine dispatches {paths(current)}. Closed-loop runs differ across SIMD paths, so differences here "
+            f"may come from the CPU (docs/benchmark.md, 'Reproducibility').")
