@@ -53,6 +53,16 @@ class ScriptedFollowerConfig:
                 f"in [{low}, {high}] (the env's range)")
 
 
+def target_inputs(observation: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """The observation's target entries a scripted follower reads, as float64 batches: (N, 3) relative position
+    [m], (N, 3) velocity [m/s], (N, 4) normalised box, and whether the observation was a batch."""
+    rel = np.asarray(observation["target_pos_rel_m"], dtype=np.float64)
+    batched = rel.ndim == 2
+    vel = np.asarray(observation["target_vel_mps"], dtype=np.float64).reshape(-1, 3)
+    bbox = np.asarray(observation["bbox_norm"], dtype=np.float64).reshape(-1, 4)
+    return rel.reshape(-1, 3), vel, bbox, batched
+
+
 class ScriptedFollower:
     """`predict(obs) -> (action, state)`; works on one observation or a batch (leading axis)."""
 
@@ -72,11 +82,7 @@ class ScriptedFollower:
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
-        rel = np.asarray(observation["target_pos_rel_m"], dtype=np.float64)
-        batched = rel.ndim == 2
-        rel = rel.reshape(-1, 3)
-        vel = np.asarray(observation["target_vel_mps"], dtype=np.float64).reshape(-1, 3)
-        bbox = np.asarray(observation["bbox_norm"], dtype=np.float64).reshape(-1, 4)
+        rel, vel, bbox, batched = target_inputs(observation)
         valid_ever = np.any(rel != 0.0, axis=1)
         height = -rel[:, 2]  # drone height above the target [m]
         n = len(rel)

@@ -15,6 +15,7 @@ import numpy as np
 
 from trade.validation import is_finite_number, is_positive_number, require
 from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, DEFAULT_WAYPOINT_SCALE
+from trade_gym.agents.scripted import target_inputs
 from trade_gym.config import CAMERA_PITCH_RANGE_DEG, EnvConfig
 from trade_gym.sim.quadrotor import QuadrotorConfig
 
@@ -96,11 +97,7 @@ class WaypointFollower:
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
-        rel = np.asarray(observation["target_pos_rel_m"], dtype=np.float64)
-        batched = rel.ndim == 2
-        rel = rel.reshape(-1, 3)
-        vel = np.asarray(observation["target_vel_mps"], dtype=np.float64).reshape(-1, 3)
-        bbox = np.asarray(observation["bbox_norm"], dtype=np.float64).reshape(-1, 4)
+        rel, vel, bbox, batched = target_inputs(observation)
         offsets = np.stack([self._centre_on_target(r, v) if np.any(r != 0.0) else self._servo_image(b)
                             for r, v, b in zip(rel, vel, bbox)])
         action = np.zeros((len(rel), ACTION_DIM), np.float32)  # up and yaw stay 0: keep altitude and yaw
