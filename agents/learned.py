@@ -53,10 +53,16 @@ class LearnedFollower:
         check_sha256_format(expected_sha256)
         self.shaping = ActionShaping(ActionShapingConfig(soft_start_s, max_accel_unfixed_mps2))
         self.model_path = Path(model_path)
-        self.soft_start_s = self.shaping.config.soft_start_s
-        self.max_accel_unfixed_mps2 = self.shaping.config.max_accel_unfixed_mps2
         self._session = open_verified_session(self.model_path, expected_sha256, "policy file", PolicyModelError)
         self._input_name = _check_io(self._session, self.model_path)
+
+    @property
+    def soft_start_s(self) -> float:
+        return self.shaping.config.soft_start_s
+
+    @property
+    def max_accel_unfixed_mps2(self) -> float:
+        return self.shaping.config.max_accel_unfixed_mps2
 
     def reset(self) -> None:
         """Forget the episodes' frame counts and last actions: the next call starts new episodes."""

@@ -119,13 +119,18 @@ class TrainConfig:
                              f"{self.checkpoint_every_steps!r} and {self.verbose!r}")
         require(bool(self.hidden_units) and all(int(h) >= 1 for h in self.hidden_units), f"{c}.hidden_units",
                 self.hidden_units, "positive layer widths")
-        ScenarioDraws(self.target_motions, self.decoy_tiers, self.appearances)  # raises on a bad choice
+        _ = self.scenarios  # ScenarioDraws raises on a bad choice
         require(is_int_at_least(self.finetune_steps, 0, numpy_ints=False), f"{c}.finetune_steps", self.finetune_steps,
                 "an integer >= 0")
         require(isinstance(self.action_shaping, bool), f"{c}.action_shaping", self.action_shaping, "a bool")
         world_seed = dict(self.env_kwargs).get("world_seed")
         if world_seed is not None:  # training draws its worlds from the training split; a fixed one must be too
             require_training_worlds([world_seed], "TrainConfig.env_kwargs world_seed")
+
+    @property
+    def scenarios(self) -> ScenarioDraws:
+        """The scenario drawn per training episode (`target_motions`, `decoy_tiers`, `appearances`)."""
+        return ScenarioDraws(self.target_motions, self.decoy_tiers, self.appearances)
 
 
 def make_training_env(config: TrainConfig, rank: int, flat: bool = True,
@@ -136,7 +141,7 @@ def make_training_env(config: TrainConfig, rank: int, flat: bool = True,
     from stable_baselines3.common.monitor import Monitor
 
     kwargs = dict(config.env_kwargs) | (dict(config.finetune_env_kwargs) if finetune else {})
-    scenarios = ScenarioDraws(config.target_motions, config.decoy_tiers, config.appearances)
+    scenarios = config.scenarios
 
     def build() -> gym.Env:
         # SB3 seeds worker `rank`'s first reset with seed + rank, which fixes its whole stream of draws

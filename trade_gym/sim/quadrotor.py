@@ -177,12 +177,12 @@ class Quadrotor:
             raise ValueError(f"position setpoint must be finite, got position {(x, y, z)!r}, yaw {yaw!r}")
         self._position_sp = (x, y, z, yaw)
 
-    def _hold_position(self, pos: tuple[float, ...], yaw: float) -> None:
-        """The velocity and yaw-rate setpoints of the position controller at position `pos` (3,) and heading `yaw`."""
-        if self._position_sp is None:
-            return
+    def _hold_position(self, position_sp: tuple[float, float, float, float], pos: tuple[float, ...],
+                       yaw: float) -> None:
+        """The velocity and yaw-rate setpoints of the position controller holding `position_sp` (x, y, z [m], yaw
+        [rad]) at position `pos` (3,) and heading `yaw`."""
         cfg = self.config
-        x, y, z, yaw_sp = self._position_sp
+        x, y, z, yaw_sp = position_sp
         kh = cfg.position_gain_horizontal_per_s
         vx, vy = kh * (x - pos[0]), kh * (y - pos[1])  # world [m/s]
         cy, sy = math.cos(yaw), math.sin(yaw)
@@ -210,7 +210,8 @@ class Quadrotor:
         pos, vel, m, w_body = self._last_read or self._query_reading()
         self._last_read = None
         yaw = math.atan2(m[3], m[0])
-        self._hold_position(pos, yaw)
+        if self._position_sp is not None:  # waypoint mode only: velocity mode pays no call per physics step
+            self._hold_position(self._position_sp, pos, yaw)
         f = self._desired_specific_thrust(yaw, vel)
         rate_sp = self._setpoint[3]
         self._advance_yaw_setpoint(yaw, rate_sp, dt_s)
