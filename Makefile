@@ -4,6 +4,8 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 ZOO_STAMP := $(VENV)/.installed-zoo
+# the numeric stack's pinned versions (pip constraints): the quick reference reproduces bit for bit only on them
+STACK := trade_gym/bench/reference_stack.txt
 # make test's reference check writes its results here (git-ignored)
 CHECK_OUT := reference_check_out
 # extra pip arguments for torch, e.g. --index-url https://download.pytorch.org/whl/cpu where pip's find-links hold no
@@ -15,12 +17,12 @@ PYTHON313 ?= $(firstword $(wildcard $(HOME)/.pyenv/versions/3.13.*/bin/python3.1
 
 .PHONY: demo test test-py312 test-py313 test-slow bench clean-venv
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml $(STACK)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	# torch first (a CPU wheel where pip finds one: TORCH_PIP_ARGS), so stable-baselines3 does not pull a CUDA build
 	$(PY) -m pip install --quiet $(TORCH_PIP_ARGS) "torch==2.13.0"
-	$(PY) -m pip install --quiet -e ".[test,ray,video,lint]"
+	$(PY) -m pip install --quiet -c $(STACK) -e ".[test,ray,video,lint]"
 	# PyPI's CUDA torch brings triton (torch.compile's GPU kernels; nothing here uses it), whose bundled LLVM segfaults
 	# the test process once pybullet's EGL plugin has loaded Mesa's LLVM (tests/trade_gym/test_egl.py probes it at
 	# collection, then the first SB3 model imports torch._dynamo, which imports triton): seen on 3.12 and 3.13;
@@ -50,7 +52,7 @@ test-py313:
 
 # the slow suite also trains with rl-zoo3 (the zoo extra, installed once into the venv)
 $(ZOO_STAMP): $(STAMP)
-	$(PY) -m pip install --quiet -e ".[zoo]"
+	$(PY) -m pip install --quiet -c $(STACK) -e ".[zoo]"
 	touch $(ZOO_STAMP)
 
 test-slow: $(ZOO_STAMP)

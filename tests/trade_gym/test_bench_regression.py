@@ -272,3 +272,31 @@ def test_reference_records_the_simd_paths_and_a_check_on_other_paths_notes_it(re
     note = reference.simd_note(other, simd_meta())
     assert note is not None and "numpy X86_V3, opencv AVX2 (AVX2)" in note and "Reproducibility" in note
     assert reference.simd_note(None) is None  # a reference from before the paths were recorded
+
+
+def test_write_reference_refuses_an_environment_off_the_pinned_stack(repo, ref, tmp_path, monkeypatch):
+    installed = reference.stack_pins() | {"numpy": "2.5.5"}
+    monkeypatch.setattr(reference, "stack_versions", lambda names=None: installed)
+    target = tmp_path / "ref.json"
+    with pytest.raises(reference.OffStack, match=r"numpy 2\.5\.5 \("):
+        reference.write_reference(_recorded_results(ref), target)
+    assert not target.exists()
+
+
+def test_a_check_in_another_environment_names_the_packages_that_differ(ref):
+    recorded = {"numpy": "2.4.6", "onnxruntime": "1.32.0"}
+    assert reference.stack_note(recorded, dict(recorded)) is None
+    note = reference.stack_note(recorded, {"numpy": "2.5.5", "onnxruntime": "1.32.0"})
+    assert note is not None and "numpy 2.5.5 (2.4.6)" in note and "onnxruntime 1.32.0" not in note
+    assert reference.stack_note(None) is None  # a reference from before the versions were recorded
+    check = reference.check_against_reference(_recorded_results(ref), ref | {"stack": {"numpy": "0.0"}})
+    assert check.stack_note is not None and "numpy" in check.stack_note
+
+
+def test_stack_pins_name_a_malformed_line(tmp_path):
+    pins = tmp_path / "pins.txt"
+    pins.write_text("# comment\nnumpy==2.4.6  # why\n\nscipy>=1.17\n")
+    with pytest.raises(ValueError, match=r"pins\.txt:4: expected 'name==version', got 'scipy>=1\.17'"):
+        reference.stack_pins(pins)
+    pins.write_text("numpy==2.4.6  # why\n")
+    assert reference.stack_pins(pins) == {"numpy": "2.4.6"}

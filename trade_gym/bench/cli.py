@@ -343,14 +343,15 @@ def _reference_steps(args: argparse.Namespace, results: list[RunResult], filtere
             try:
                 reference.write_reference(results, args.write_reference)
                 print(f"wrote reference {args.write_reference}", file=sys.stderr)
-            except reference.UncleanTree as exc:  # the tree changed while the suite ran
+            except (reference.UncleanTree, reference.OffStack) as exc:  # the tree changed while the suite ran
                 print(f"{PROG}: error: reference not written: {exc}", file=sys.stderr)
                 status = EXIT_USAGE
     if args.check_reference is not None:
         check = reference.check_against_reference(results, reference.load_reference(args.check_reference), filtered)
         print(check.summary_line(), file=sys.stderr)
-        if check.simd_note is not None:
-            print(check.simd_note, file=sys.stderr)
+        for note in (check.simd_note, check.stack_note):
+            if note is not None:
+                print(note, file=sys.stderr)
         for line in check.problems:
             print(f"  {line}", file=sys.stderr)
         if check.problems:

@@ -9,6 +9,10 @@ ample room for that while one frame scored differently moves a fraction of a 150
 SIMD paths the closed loop does not reproduce: with numpy's AVX-512 dispatch turned off, one TRADE run of the
 suite differed by 0.19 m in ground RMSE (benchmarks/results/simd_paths.json, docs/benchmark.md). The reference
 therefore records the SIMD paths it was measured on (`simd_meta`), and a check on other paths says so.
+Across package versions it does not reproduce either (numpy 2.5 against 2.4 moves the mountain TRADE run's ground
+RMSE by 0.17 m): the versions of the numeric stack are pinned in `reference_stack.txt`, a pip constraints file that
+`make test` installs with, the reference records the versions it was measured with (`stack_versions`), writing
+one refuses an environment off the pins, and a check in another environment names the packages that differ.
 A change is a failure whether it is better or worse: an improvement is re-recorded on purpose, with its
 numbers in the commit message. The check also fails on a run of the suite missing from the reference, a
 reference run missing from the results (unless the suite was filtered), a run that failed, and a metric
@@ -20,6 +24,7 @@ Regenerate (after an intended change, from a clean git tree, whose commit the re
 
 from __future__ import annotations
 
+import importlib.metadata
 import json
 import math
 import subprocess
@@ -35,6 +40,7 @@ from trade_gym.bench.runner import RunResult
 from trade_gym.provenance import git_head, tracked_changes
 
 REFERENCE_FILE = "quick_reference.json"
+STACK_FILE = "reference_stack.txt"  # pip constraints: the numeric packages the reference reproduces with
 REGENERATE_COMMAND = "trade-bench --suite quick --out /tmp/quick --write-reference"
 REPO_DIR = Path(__file__).resolve().parent  # git runs here: the checkout this code was loaded from
 SHOWN_CHANGES = 5  # changed files named in the dirty-tree error
@@ -115,6 +121,51 @@ def clean_commit(repo: Path | None = None) -> str:
     return commit
 
 
+def stack_pins(path: Path | None = None) -> dict[str, str]:
+    """The pinned versions of `STACK_FILE` (lines 'name==version'; '#' starts a comment)."""
+    path = Path(str(resources.files("trade_gym.bench").joinpath(STACK_FILE))) if path is None else path
+    pins = {}
+    for number, raw in enumerate(path.read_text().splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        name, sep, version = line.partition("==")
+        if not sep or not name.strip() or not version.strip():
+            raise ValueError(f"{path}:{number}: expected 'name==version', got {raw!r}")
+        pins[name.strip()] = version.strip()
+    return pins
+
+
+def stack_versions(names: Sequence[str] | None = None) -> dict[str, str]:
+    """The installed versions of the pinned packages (or of `names`); 'not installed' for a missing one."""
+    versions = {}
+    for name in stack_pins() if names is None else names:
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def stack_differences(recorded: dict[str, str], current: dict[str, str]) -> list[str]:
+    """'name current (recorded)' for each package of `recorded` whose version differs in `current`."""
+    return [f"{name} {current.get(name, 'not installed')} ({version})" for name, version in recorded.items()
+            if current.get(name) != version]
+
+
+def stack_note(recorded: dict[str, str] | None, current: dict[str, str] | None = None) -> str | None:
+    """A note when this environment's numeric stack differs from the one the reference was measured with (None
+    in an older reference that did not record it)."""
+    if recorded is None:
+        return None
+    differences = stack_differences(recorded, stack_versions(list(recorded)) if current is None else current)
+    if not differences:
+        return None
+    return (f"note: this environment differs from the reference's package versions: {', '.join(differences)} "
+            f"(installed (recorded)). Closed-loop runs differ across numpy/OpenCV/onnxruntime versions; make "
+            f"test installs the pinned versions of trade_gym/bench/{STACK_FILE}.")
+
+
 def reference_document(results: Sequence[RunResult]) -> dict[str, Any]:
     """The reference of `results` (finished runs only); UncleanTree on a dirty checkout."""
     return {
@@ -123,13 +174,23 @@ def reference_document(results: Sequence[RunResult]) -> dict[str, Any]:
         "commit": clean_commit(),
         "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "simd": simd_meta(),
+        "stack": stack_versions(),
         "runs": {r.spec.run_id: {"steps_requested": r.spec.steps, "camera_size": r.spec.camera_size,
                                  "metrics": dict(r.metrics)} for r in results if r.error is None},
     }
 
 
+class OffStack(ValueError):
+    """The installed numeric stack differs from the pins of `STACK_FILE`."""
+
+
 def write_reference(results: Sequence[RunResult], path: Path) -> None:
-    """Write the reference; UncleanTree (nothing written) on a dirty checkout."""
+    """Write the reference; UncleanTree on a dirty checkout and OffStack off the pinned versions (nothing
+    written)."""
+    differences = stack_differences(stack_pins(), stack_versions())
+    if differences:
+        raise OffStack(f"the installed packages differ from trade_gym/bench/{STACK_FILE}: {', '.join(differences)} "
+                       f"(installed (pinned)); record in a venv that make builds, or change the pins on purpose")
     document = reference_document(results)
     path.write_text(json.dumps(to_json_safe(document), indent=1, allow_nan=False) + "\n")
 
@@ -182,6 +243,8 @@ class ReferenceCheck:
     filtered: bool  # only a part of the suite was run, so reference runs without a result were not required
     # set when the reference was measured on other SIMD paths than this machine's (`simd_note`)
     simd_note: str | None = None
+    # set when the reference was measured with other package versions than this environment's (`stack_note`)
+    stack_note: str | None = None
 
     def summary_line(self) -> str:
         scope = " (suite filtered)" if self.filtered else ""
@@ -221,7 +284,8 @@ def check_against_reference(results: Sequence[RunResult], reference: dict[str, A
     if not filtered:
         present = {r.spec.run_id for r in results}
         problems += [f"{run_id}: in the reference, not in the results" for run_id in runs if run_id not in present]
-    return ReferenceCheck(tuple(problems), compared, len(runs), filtered, simd_note(reference.get("simd")))
+    return ReferenceCheck(tuple(problems), compared, len(runs), filtered, simd_note(reference.get("simd")),
+                          stack_note(reference.get("stack")))
 
 
 def simd_note(recorded: dict[str, Any] | None, current: dict[str, Any] | None = None) -> str | None:
