@@ -300,3 +300,9 @@ def test_stack_pins_name_a_malformed_line(tmp_path):
         reference.stack_pins(pins)
     pins.write_text("numpy==2.4.6  # why\n")
     assert reference.stack_pins(pins) == {"numpy": "2.4.6"}
+
+
+def test_reference_stack_pins_are_the_versions_the_reference_was_recorded_with(ref):
+    pins = reference.stack_pins()
+    assert {"numpy", "opencv-python-headless", "onnxruntime", "pybullet"} <= set(pins)
+    assert ref["stack"] == pins  # the constraints make test installs with reproduce the reference
