@@ -37,6 +37,35 @@ ORACLE_PREFIX = "oracle_"  # EnvConfig's oracle_<name> is OracleConfig's <name>
 # Each reset builds its world from them; nothing the env builds at construction depends on them.
 EPISODE_OPTIONS = ("scene", "decoys", "target_motion", "appearance")
 
+# `stack`: the perception stack's preset. "full": the offline TRADE of the paper (every module, estimates at once).
+# "light": the onboard TRADE the paper flew on a Voxl 2 (trade_paper.tex, the lighter version's paragraph): the
+# tracker (STARK there) at about 5-10 fps through onnxruntime, ROI feature tracking with robust plane fitting and
+# temporal fusion in a separate thread, no single-image depth and no ground mask. Its tracker's compute is charged
+# through the fixed latency mode: one period of LIGHT_TRACKER_RATE_HZ, the middle of the paper's 5-10 fps band. The
+# stack still sees every frame (its throughput is not limited; only when an estimate arrives is).
+STACKS = ("full", "light")
+LIGHT_TRACKER_RATE_HZ = 7.5
+# The keywords a preset sets, and their values; a keyword left at STACK_DEFAULT takes its stack's value, one given
+# explicitly must agree with a preset that fixes it.
+STACK_PRESETS: dict[str, dict[str, Any]] = {
+    "full": {"temporal_fusion": True, "ground_mask": True, "single_image_depth": False,
+             "perception_latency": "none", "perception_latency_ms": None},
+    "light": {"temporal_fusion": True, "ground_mask": False, "single_image_depth": False,
+              "perception_latency": "fixed", "perception_latency_ms": MS_PER_S / LIGHT_TRACKER_RATE_HZ},
+}
+# Keywords a light preset fixes (the full stack is the default of each: there they stay free for ablations)
+LIGHT_FIXED = ("ground_mask", "single_image_depth")
+
+
+class _StackDefault:
+    """The default of a keyword the `stack` preset sets (`STACK_PRESETS`), replaced by the preset's value."""
+
+    def __repr__(self) -> str:
+        return "STACK_DEFAULT"
+
+
+STACK_DEFAULT: Any = _StackDefault()
+
 PHYSICS_RATE_HZ = 240
 CAMERA_RATE_HZ = 30
 MIN_CAMERA_SIZE_PX = 16
@@ -63,10 +92,14 @@ class EnvConfig:
     episode_duration_s: float = 30.0  # truncation horizon [s]
     lost_timeout_s: float = 3.0  # terminate when the target is out of view this long [s]
     visible_fraction_threshold: float = 0.25  # target counts as visible above this fraction
-    # Perception ablation switches (perception="trade" or "dcf"); the defaults are full TRADE.
-    temporal_fusion: bool = True
-    ground_mask: bool = True  # single-image depth runs every third frame for it
-    single_image_depth: bool = False  # depth-only mode (paper Table 2); needs ground_mask=False
+    # The perception stack's preset (STACKS): "full" TRADE (the default) or the paper's onboard "light" one; it sets
+    # the switches and the latency below that are left at their default (STACK_PRESETS)
+    stack: str = "full"
+    # Perception ablation switches (perception="trade" or "dcf"); the defaults are the stack's (full TRADE: on, on,
+    # off; light: on, off, off, and the light stack cannot turn the ground mask or single-image depth on).
+    temporal_fusion: bool = STACK_DEFAULT
+    ground_mask: bool = STACK_DEFAULT  # single-image depth runs every third frame for it
+    single_image_depth: bool = STACK_DEFAULT  # depth-only mode (paper Table 2); needs ground_mask=False
     depth_only_ransac: bool = True  # depth-only alignment by RANSAC; False: plain least squares
     trajectory_guidance: bool = True
     init_box_perturb_px: float = 0.0  # uniform perturbation of the initial box [px]
@@ -98,8 +131,9 @@ class EnvConfig:
     # Perception latency (`trade_gym.latency`): "none" (the estimate of a frame is in that frame's observation),
     # "fixed" (it arrives perception_latency_ms after its frame) or "measured" (after perception's wall-clock
     # compute time for that frame: not deterministic). perception_latency_ms only with "fixed" [ms].
-    perception_latency: str = "none"
-    perception_latency_ms: float | None = None
+    # The stack's latency by default: "none" for the full stack, "fixed" at one tracker period for the light one.
+    perception_latency: str = STACK_DEFAULT
+    perception_latency_ms: float | None = STACK_DEFAULT
     # What the action sets (`trade_gym.action`): "velocity" (velocity and yaw-rate setpoints, heading frame) or
     # "waypoint" (a position and heading offset from the drone, held by the quadrotor's position controller as a PX4
     # offboard position setpoint; scaled by `waypoint_scale`, unused in velocity mode).
@@ -114,6 +148,7 @@ class EnvConfig:
     waypoint_scale: WaypointScale = field(default_factory=WaypointScale)
 
     def __post_init__(self) -> None:
+        _apply_stack(self)
         for name, config_type in NESTED_CONFIGS.items():
             object.__setattr__(self, name, nested_config(name, getattr(self, name), config_type))
         check_choice("scene", self.scene, SCENE_NAMES)
@@ -189,6 +224,20 @@ class EnvConfig:
     def needs_rendering(self) -> bool:
         """Whether a step renders the camera."""
         return self.perception != "oracle" or self.render_mode is not None or self.render_oracle_frames
+
+
+def _apply_stack(config: EnvConfig) -> None:
+    """Give every keyword left at STACK_DEFAULT its stack's value (a latency mode given explicitly brings no preset
+    milliseconds: None, to be given with "fixed"); ValueError for an unknown stack, or a keyword the light stack fixes
+    given another value."""
+    check_choice("stack", config.stack, STACKS)
+    latency_given = config.perception_latency is not STACK_DEFAULT
+    for name, value in STACK_PRESETS[config.stack].items():
+        given = getattr(config, name)
+        if given is STACK_DEFAULT:
+            object.__setattr__(config, name, None if name == "perception_latency_ms" and latency_given else value)
+        elif config.stack == "light" and name in LIGHT_FIXED and given != value:
+            raise ValueError(f"stack='light' runs without {name} (the paper's onboard stack), got {name}={given!r}")
 
 
 def _check_latency(mode: object, latency_ms: object) -> None:

@@ -129,7 +129,8 @@ class TradeFollowEnv(gym.Env):
 
     ## Arguments
     All fields of `trade_gym.config.EnvConfig`, e.g. `scene`, `perception`, `pose_source`,
-    `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, ablation switches,
+    `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, `stack` ("full", the default; "light": the
+    paper's onboard stack, `trade_gym.config.STACK_PRESETS`), ablation switches (their defaults are the stack's),
     `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0),
     `action_mode` ("velocity", "waypoint"), the components' configs `reward=`, `quadrotor=`, `vio=` and
     `waypoint_scale=` (each the config or a mapping of its fields), `decoys`, `target_motion`, `appearance`, `renderer`.
@@ -156,6 +157,8 @@ class TradeFollowEnv(gym.Env):
     - v0, issue 41: `reset(options={...})` sets `decoys`, `target_motion` and `appearance` for that episode only.
     - v0, issue 44: `reset(options={...})` sets the `scene` too (a wrapper above the env can draw it per episode).
     - v0, issue 45: `action_mode` ("velocity", the default and as before; "waypoint") and `waypoint_scale`.
+    - v0, issue 45: `stack` ("full", the default and as before; "light": no ground mask or single-image depth, the
+      tracker charged as a fixed latency of one 7.5 fps period).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
