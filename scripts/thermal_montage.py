@@ -3,7 +3,8 @@ thermal camera at night (2 h), at the morning crossover and by day (13 h), in th
 
 The crossover hour is computed per scene from the thermal scene's model: the morning hour at which the target's parked
 twin (its material, the mean albedo of its pixels) comes closest to the terrain's temperature (its material and mean
-albedo), both horizontal (a white truck never gets as warm as dark asphalt: then the closest approach). Deterministic: re-running reproduces the same PNG. Usage: python scripts/thermal_montage.py [out.png]
+albedo), both horizontal (a white truck never gets as warm as dark asphalt: then the closest approach).
+Deterministic: re-running reproduces the same PNG. Usage: python scripts/thermal_montage.py [out.png]
 """
 
 from __future__ import annotations

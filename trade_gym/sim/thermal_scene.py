@@ -232,7 +232,8 @@ class SurfaceModel:
         # net long-wave loss of a black surface to the clear sky, linearised at the air: sigma T_air^4 (1 - eps_sky)
         self._sky_loss_w_m2 = STEFAN_BOLTZMANN_W_M2K4 * (self.sun.air_k**4 - self.sun.sky_k**4)
 
-    def material_temperature_k(self, material: str, albedo: float = 0.0, normal: tuple[float, ...] = (0, 0, 1)) -> float:
+    def material_temperature_k(self, material: str, albedo: float = 0.0,
+                               normal: tuple[float, ...] = (0.0, 0.0, 1.0)) -> float:
         """One surface's temperature [K] (for tests and docs): `surface_temperature_k` of a single pixel."""
         index = np.full((1, 1), MATERIAL_NAMES.index(material))
         normals = np.asarray(normal, dtype=np.float32).reshape(1, 1, 3)

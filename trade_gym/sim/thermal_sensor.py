@@ -20,7 +20,7 @@ from trade.validation import check_non_negative, check_positive, check_range, re
 F32 = npt.NDArray[np.float32]
 UInt8Image = npt.NDArray[np.uint8]
 MK_PER_K = 1000.0
-# Raw output: 14-bit counts (Boson datasheet 102-2013-40: 14-bit pre-AGC video), linear in radiance temperature
+# Raw output: 14-bit counts (FLIR's cores: the Lepton datasheet's AGC maps 14 bits to 8), linear in radiance temperature
 # around the scene (a linearisation: a microbolometer is linear in in-band radiance, not in temperature); one count is
 # RAW_K_PER_COUNT (assumed: fine beside the NETD, so quantisation adds (20 mK)^2 / 12, ~6 mK rms), count 0 at
 # RAW_ZERO_K, so 200-528 K fit
@@ -46,16 +46,18 @@ class ThermalConfig:
       = 4.2 um) with the 12 um pixel's own aperture (sigma 12 / sqrt(12) = 3.5 um): sqrt(4.2^2 + 3.5^2) / 12 um
       = 0.45 px, independent of the focal length.
     - agc_plateau_fraction: the plateau: histogram bins are clipped at this share of all pixels before equalising
-      (FLIR's "plateau equalization"; the Lepton datasheet's "clip limit high"), so a large uniform area (the
-      ground) cannot take most of the grey levels (assumed value).
+      (the "clip limit high" of the histogram equalisation in FLIR's Lepton datasheet 500-0659-00-09), so a large
+      uniform area (the ground) cannot take most of the grey levels. Chosen by eye on development world 3 (the Lepton's
+      power-on default is the whole pixel count: no clipping, classic equalisation).
     - agc_tail_fraction: share of the pixels at each end of the histogram mapped to 0 / 255 outright (assumed).
-    - agc_linear_fraction: share of a linear stretch between the tails mixed into the equalised map (FLIR's
-      "linear percent"; assumed value).
+    - agc_linear_fraction: share of a linear stretch between the tails mixed into the equalised map (the
+      "linear percent" control of the Lepton SDK's histogram equalisation; value assumed).
     - ffc_freeze: whether flat-field correction freezes the output: every `ffc_interval_s` [s] the shutter closes
-      and the last image is held for `ffc_duration_s` [s]. Boson corrects itself every few minutes or after a camera
-      temperature change (FLIR Lepton datasheet: by default every 3 min or 1.5 K); cameras with FLIR cores freeze the
-      video for under a second while it lasts (e.g. Bosch MIC thermal manual). When the first one comes is drawn
-      per episode, uniformly over one interval.
+      and the last image is held for `ffc_duration_s` [s]. FLIR's cores correct themselves after a set period or a
+      camera temperature change (the Lepton's FFC mode has both); 180 s is assumed ("every few minutes"). The
+      Lepton's shutter event lasts ~1 s (its datasheet) and cameras with FLIR cores freeze the video for under a second
+      (e.g. Bosch MIC thermal manual): 0.5 s assumed. When the first one comes is drawn per episode, uniformly over
+      one interval.
     """
 
     netd_mk: float = 50.0
@@ -159,7 +161,8 @@ def plateau_equalize(raw: npt.NDArray[np.uint16], plateau_fraction: float, tail_
     clipped = np.minimum(counts, plateau_fraction * flat.size)
     cumulative = np.cumsum(clipped)
     # bin b maps to the share of clipped pixels below it plus half its own: the first bin to ~0, the last to ~1
-    equalised = (cumulative - 0.5 * clipped - 0.5 * clipped[0]) / (cumulative[-1] - 0.5 * clipped[0] - 0.5 * clipped[-1])
+    first, last = 0.5 * clipped[0], 0.5 * clipped[-1]
+    equalised = (cumulative - 0.5 * clipped - first) / (cumulative[-1] - first - last)
     linear = np.linspace(0.0, 1.0, high - low + 1)
     lut = np.rint(OUT_MAX_DN * ((1.0 - linear_fraction) * equalised + linear_fraction * linear))
     lut = np.clip(lut, 0, OUT_MAX_DN).astype(np.uint8)
