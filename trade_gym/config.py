@@ -15,11 +15,12 @@ from trade_gym.action import ACTION_MODES, WaypointScale
 from trade_gym.perception.oracle import OracleConfig
 from trade_gym.reward import RewardConfig
 from trade_gym.sim.appearance import APPEARANCE_MODES
-from trade_gym.sim.camera import RENDERERS, CameraConfig
+from trade_gym.sim.camera import MODALITIES, RENDERERS, CameraConfig
 from trade_gym.sim.pose_source import VioConfig
 from trade_gym.sim.quadrotor import QuadrotorConfig
 from trade_gym.sim.scenes import DECOY_TIERS
 from trade_gym.sim.target_motion import TARGET_MOTIONS
+from trade_gym.sim.thermal_sensor import ThermalConfig
 
 PERCEPTION_MODES = ("trade", "dcf", "oracle")
 POSE_SOURCES = ("gt", "vio")
@@ -31,7 +32,7 @@ LATENCY_MODES = ("none", "fixed", "measured")
 MS_PER_S = 1000.0
 # EnvConfig's fields that hold a component's whole config (given as the config or a mapping of its fields)
 NESTED_CONFIGS = {"reward": RewardConfig, "quadrotor": QuadrotorConfig, "vio": VioConfig,
-                  "waypoint_scale": WaypointScale}
+                  "waypoint_scale": WaypointScale, "thermal": ThermalConfig}
 ORACLE_PREFIX = "oracle_"  # EnvConfig's oracle_<name> is OracleConfig's <name>
 # The settings `reset(options=...)` may set for one episode (`EnvConfig.for_episode`): the scene and the scenario.
 # Each reset builds its world from them; nothing the env builds at construction depends on them.
@@ -71,6 +72,7 @@ CAMERA_RATE_HZ = 30
 MIN_CAMERA_SIZE_PX = 16
 CAMERA_FOV_RANGE_DEG = (10.0, 170.0)
 CAMERA_PITCH_RANGE_DEG = (30.0, 90.0)  # 90 = straight down
+TIME_OF_DAY_RANGE_H = (0.0, 24.0)
 
 
 @dataclass(frozen=True)
@@ -117,6 +119,12 @@ class EnvConfig:
     # "fixed" (the paper's scenes as they are) or "randomized": light, ground, vehicle paint, haze and camera effects
     # drawn per reset from the reset seed, on a stream of their own (`trade_gym.sim.appearance`)
     appearance: str = "fixed"
+    # What the camera images (`trade_gym.sim.thermal_camera`): "rgb" (visible light) or "thermal" (a scene of surface
+    # temperatures through a Boson-like microbolometer, `thermal=`: the grey image it outputs, in all three channels).
+    # time_of_day_h [h, 0-24, solar time] sets the thermal scene's sun and air; None: 13 h, or drawn per reset with
+    # appearance="randomized". Thermal only (the visible scenes' light is pybullet's own or the appearance's draw).
+    camera_modality: str = "rgb"
+    time_of_day_h: float | None = None
     # Oracle noise model (perception="oracle"): oracle_<name> is OracleConfig's <name> (`self.oracle`), with its
     # defaults (fitted to full TRADE's closed-loop errors on training worlds; see OracleConfig).
     oracle_box_sigma_px: float = OracleConfig.box_sigma_px  # box jitter per x, y, w, h [px]
@@ -141,11 +149,12 @@ class EnvConfig:
     # Components' configs, each a config or a mapping of its fields (NESTED_CONFIGS): the reward's weights
     # (`trade_gym.reward`); the airframe, setpoint limits (the velocity action's scale, `trade_gym.action`) and
     # controller gains (velocity, attitude, position); the VIO pose drift (pose_source="vio"); the waypoint action's
-    # scale (action_mode="waypoint").
+    # scale (action_mode="waypoint"); the thermal camera's sensor (camera_modality="thermal", `ThermalConfig`).
     reward: RewardConfig = field(default_factory=RewardConfig)
     quadrotor: QuadrotorConfig = field(default_factory=QuadrotorConfig)
     vio: VioConfig = field(default_factory=VioConfig)
     waypoint_scale: WaypointScale = field(default_factory=WaypointScale)
+    thermal: ThermalConfig = field(default_factory=ThermalConfig)
 
     def __post_init__(self) -> None:
         _apply_stack(self)
@@ -160,6 +169,8 @@ class EnvConfig:
         check_choice("render_mode", self.render_mode, RENDER_MODES)
         check_choice("renderer", self.renderer, RENDERERS)
         check_choice("action_mode", self.action_mode, ACTION_MODES)
+        check_choice("camera_modality", self.camera_modality, MODALITIES)
+        _check_time_of_day(self.time_of_day_h, self.camera_modality)
         _check_latency(self.perception_latency, self.perception_latency_ms)
         require(is_int_at_least(self.camera_size, MIN_CAMERA_SIZE_PX, numpy_ints=False), "camera_size",
                 self.camera_size, f"an integer >= {MIN_CAMERA_SIZE_PX} [px]")
@@ -198,9 +209,9 @@ class EnvConfig:
         return replace(self, **options)
 
     def camera_config(self) -> CameraConfig:
-        """The camera these arguments describe (square image, field of view, pitch, renderer)."""
+        """The camera these arguments describe (square image, field of view, pitch, renderer, modality)."""
         return CameraConfig(width_px=self.camera_size, height_px=self.camera_size, fov_deg=self.camera_fov_deg,
-                            pitch_deg=self.camera_pitch_deg, renderer=self.renderer)
+                            pitch_deg=self.camera_pitch_deg, renderer=self.renderer, modality=self.camera_modality)
 
     @property
     def physics_steps_per_frame(self) -> int:
@@ -250,3 +261,12 @@ def _check_latency(mode: object, latency_ms: object) -> None:
     if latency_ms is None:
         raise ValueError("perception_latency='fixed' needs perception_latency_ms (a number >= 0 [ms]), got None")
     check_non_negative("perception_latency_ms", latency_ms)
+
+
+def _check_time_of_day(time_h: object, modality: object) -> None:
+    if time_h is None:
+        return
+    check_range("time_of_day_h", time_h, *TIME_OF_DAY_RANGE_H)
+    if modality != "thermal":
+        raise ValueError(f"time_of_day_h sets the thermal scene and needs camera_modality='thermal', got "
+                         f"time_of_day_h={time_h!r} with camera_modality={modality!r}")

@@ -1,8 +1,7 @@
 """TradeFollow-v0: follow a ground vehicle from a quadrotor with a downward camera.
 
-The env owns one pybullet client and wires sim -> sensors -> perception -> observation;
-the policy's action flows back as a velocity setpoint (or, in waypoint mode, a position setpoint). Perception sees the sensors only; the env scores its
-estimates against ground truth (`trade_gym.scoring`).
+The env owns one pybullet client and wires sim -> sensors -> perception -> observation; the policy's action flows back
+as a velocity (or a position) setpoint. Perception sees the sensors only; the env scores it (`trade_gym.scoring`).
 """
 
 from __future__ import annotations
@@ -19,7 +18,7 @@ import pybullet as p
 
 from trade.geometry import Pose
 from trade_gym.action import ACTION_DIM, ActionScale, action_space, clip_action, waypoint_setpoint
-from trade_gym.annotate import annotate_frame
+from trade_gym.annotate import annotate_frame, display_image
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.faults import SensorFilter
 from trade_gym.ground_truth import GroundTruth, VehicleBoxes, compute_ground_truth
@@ -34,6 +33,7 @@ from trade_gym.sim.camera import Camera, CameraFrame
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import make_pose_source
 from trade_gym.sim.quadrotor import Quadrotor
+from trade_gym.sim.thermal_camera import thermal_camera, thermal_stream
 from trade_gym.sim.world import DecoyTier, TargetMotion, World, build_world
 
 GRAVITY_MPS2 = 9.81
@@ -102,8 +102,8 @@ class TradeFollowEnv(gym.Env):
     `target_position_m`; `horizontal_distance_m`; `decoy_bboxes`; `reward_<term>`. The env computes them all
     (`trade_gym.scoring`; perception sees sensors only, the oracle truth through providers given at construction);
     `ground_depth_est`, the paper's Table 1 quantity, is the estimated ground's depth on the true box centre's ray.
-    The reset's `info` also holds `target_motion`: the mode and what was drawn for it (`TargetMotion`).
-    The reset's info adds `appearance`: {"mode": "fixed"}, or the values drawn with `appearance="randomized"`.
+    The reset's `info` also holds `target_motion` (the mode and what was drawn for it, `TargetMotion`), `appearance`
+    ({"mode": "fixed"} or the `appearance="randomized"` draw) and with a thermal camera `thermal` (`ThermalLook`).
 
     ## Rewards
     The task in its own units, from ground truth; the terms sum to the reward and each is in
@@ -132,8 +132,9 @@ class TradeFollowEnv(gym.Env):
     `camera_size`, `camera_fov_deg`, `camera_pitch_deg`, `render_mode`, `stack` ("full", the default; "light": the
     paper's onboard stack, `trade_gym.config.STACK_PRESETS`), ablation switches (their defaults are the stack's),
     `perception_latency` ("none", "fixed", "measured") and `perception_latency_ms` (with "fixed" only, >= 0),
-    `action_mode` ("velocity", "waypoint"), the components' configs `reward=`, `quadrotor=`, `vio=` and
-    `waypoint_scale=` (each the config or a mapping of its fields), `decoys`, `target_motion`, `appearance`, `renderer`.
+    `action_mode` ("velocity", "waypoint"), the components' configs `reward=`, `quadrotor=`, `vio=`, `waypoint_scale=`
+    and `thermal=` (each the config or a mapping of its fields), `decoys`, `target_motion`, `appearance`, `renderer`,
+    `camera_modality` ("rgb", "thermal": the camera outputs one grey image, in all three channels) and `time_of_day_h`.
 
     ## Version History
     - v0: initial release.
@@ -156,9 +157,9 @@ class TradeFollowEnv(gym.Env):
     - v0, issue 41: the reward's `distance` is measured mostly in following-band distances (`RewardConfig`).
     - v0, issue 41: `reset(options={...})` sets `decoys`, `target_motion` and `appearance` for that episode only.
     - v0, issue 44: `reset(options={...})` sets the `scene` too (a wrapper above the env can draw it per episode).
-    - v0, issue 45: `action_mode` ("velocity", the default and as before; "waypoint") and `waypoint_scale`.
-    - v0, issue 45: `stack` ("full", the default and as before; "light": no ground mask or single-image depth, the
-      tracker charged as a fixed latency of one 7.5 fps period).
+    - v0, issue 45 (each default as before): `action_mode` ("velocity"; "waypoint") and `waypoint_scale`; `stack`
+      ("full"; "light": no ground mask or single-image depth, a fixed latency of one 7.5 fps tracker period);
+      `camera_modality` ("rgb"; "thermal"), `time_of_day_h` and `thermal=`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -204,10 +205,13 @@ class TradeFollowEnv(gym.Env):
         p.setTimeStep(1.0 / PHYSICS_RATE_HZ, physicsClientId=cid)
         cfg = self.episode_config = self.config.for_episode(options)  # this episode's scene and scenario
         rng, look_rng = self.np_random, appearance_stream(self.np_random, cfg.appearance)
+        heat_rng = thermal_stream(self.np_random, cfg.camera_modality)  # None for "rgb"; neither moves `rng`
         world_rng = rng if cfg.world_seed is None else np.random.default_rng(cfg.world_seed)
         self.world = build_world(cid, cfg.scene, world_rng, cfg.target_speed_mps, DecoyTier(cfg.decoys, cfg.camera_fov_deg),
                                  TargetMotion(cfg.target_motion, cfg.camera_fov_deg), rendered=cfg.needs_rendering)
-        self._look = EpisodeLook(look_rng, self.world, self.camera)
+        thermal = thermal_camera(heat_rng, self.world, self.camera.intrinsics, cfg.thermal, cfg.time_of_day_h,
+                                 cfg.appearance == "randomized")
+        self._look = EpisodeLook(look_rng, self.world, self.camera, thermal)
         self._follow_band = follow_band(self.world.spec.follow_altitude_agl_m, cfg.camera_fov_deg)  # reward, info
         start_position, start_yaw = self.world.drone_start()
         self.quadrotor.spawn(start_position, start_yaw)
@@ -261,8 +265,8 @@ class TradeFollowEnv(gym.Env):
             return None
         if self._last_frame is None:
             raise RuntimeError("render() needs a reset() first")
-        return annotate_frame(self._last_frame.rgb, self._last_truth, self._last_estimate,
-                              getattr(self.perception, "overlay", None))
+        return annotate_frame(display_image(self._last_frame.rgb, self.config.camera_modality), self._last_truth,
+                              self._last_estimate, getattr(self.perception, "overlay", None))
 
     def close(self) -> None:
         if self._client is not None:

@@ -29,7 +29,7 @@ NUMERIC_FIELDS = {
     "init_box_perturb_px": False, "init_frame_shift_max": False, "oracle_box_sigma_px": False,
     "oracle_depth_sigma_frac": False, "oracle_velocity_sigma_mps": False, "oracle_dropout_prob": False,
     "oracle_noise_correlation_s": False, "oracle_first_fix_delay_s": False, "world_seed": False,
-    "perception_latency_ms": False,
+    "perception_latency_ms": False, "time_of_day_h": False,
 }
 BOOL_FIELDS = [f.name for f in dataclasses.fields(EnvConfig) if f.type == "bool"]
 BAD_NUMBERS = [math.nan, math.inf, -math.inf, -1.0]

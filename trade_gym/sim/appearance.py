@@ -2,6 +2,7 @@
 
 Owns `Appearance` (one reset's drawn values), `draw_appearance`, its own random stream (`appearance_stream`) and
 `EpisodeLook`, which applies the draw to the world's bodies and renders through it; "fixed" draws and changes nothing.
+A thermal camera (`trade_gym.sim.thermal_camera`) renders through it too.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from trade_gym.sim.camera_effects import CameraEffects, CameraLook
 from trade_gym.sim.quadrotor import DroneState
 from trade_gym.sim.scenes import SceneSpec
 from trade_gym.sim.texture_variants import ground_variant, palette_variant, variant_path
+from trade_gym.sim.thermal_camera import UNLIT, ThermalCamera
 
 if TYPE_CHECKING:
     from trade_gym.sim.world import World
@@ -161,12 +163,16 @@ def apply_to_world(world: World, appearance: Appearance) -> None:
 class EpisodeLook:
     """One episode's appearance. Without a stream ("fixed") it renders exactly as `camera.render`; with one it
     draws an `Appearance` from a first child of it, applies it to `world`'s bodies at once, and renders under its
-    light through `CameraEffects`, whose per-frame noise comes from a second child. `info` is what the reset's
-    info gains: {"appearance": {"mode": "fixed"}} or the draw (`Appearance.as_info`)."""
+    light through `CameraEffects`, whose per-frame noise comes from a second child. With a `thermal` camera it renders
+    every frame unlit and makes the thermal image of it instead (the drawn ground and paint reach it as albedo; the
+    drawn light and camera effects are the visible camera's and do not apply). `info` is what the reset's info gains:
+    {"appearance": {"mode": "fixed"}} or the draw (`Appearance.as_info`), and {"thermal": ...} with a thermal camera."""
 
-    def __init__(self, stream: np.random.Generator | None, world: World, camera: Camera) -> None:
+    def __init__(self, stream: np.random.Generator | None, world: World, camera: Camera,
+                 thermal: ThermalCamera | None = None) -> None:
         self.camera = camera
         self.world = world
+        self.thermal = thermal
         self.appearance: Appearance | None = None
         self._effects: CameraEffects | None = None
         if stream is None:
@@ -178,14 +184,18 @@ class EpisodeLook:
 
     @property
     def info(self) -> dict[str, Any]:
-        """A fresh {"appearance": ...} for the reset's info."""
-        return {"appearance": {"mode": "fixed"} if self.appearance is None else self.appearance.as_info()}
+        """A fresh {"appearance": ...} (and {"thermal": ...}) for the reset's info."""
+        looks = {"appearance": {"mode": "fixed"} if self.appearance is None else self.appearance.as_info()}
+        return looks if self.thermal is None else looks | {"thermal": self.thermal.info}
 
     def render(self, T_world_cam: Pose, state: DroneState) -> CameraFrame:
         """The frame from `T_world_cam` as the camera delivers it; `state` (the drone's velocity and body rates)
-        smears it over the exposure. Depth and segmentation are the renderer's either way."""
+        smears it over the exposure, its time (`t_s`) times the thermal camera. Depth and segmentation are the
+        renderer's either way."""
         cfg = self.camera.config
         self.world.prepare_render(T_world_cam, self.camera.intrinsics, cfg.near_m, cfg.far_m)
+        if self.thermal is not None:
+            return self.thermal.render(self.camera.render(T_world_cam, UNLIT), state.t_s)
         if self.appearance is None or self._effects is None:  # both None, or neither
             return self.camera.render(T_world_cam)
         frame = self.camera.render(T_world_cam, self.appearance.lighting)

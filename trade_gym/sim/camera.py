@@ -19,6 +19,7 @@ from trade_gym.sim.mesh_files import draw_meshes_from_files
 FloatArray = npt.NDArray[np.float64]
 
 RENDERERS = ("tiny", "egl")
+MODALITIES = ("rgb", "thermal")  # what the camera images: visible light, or long-wave infrared (`thermal_camera`)
 # Where each renderer samples pixel (u, v) (OpenCV, row 0 on top): NDC x = 2 (u + du) / W - 1,
 # NDC y = 1 - 2 (v + dv) / H. Measured by rendering markers at known points (tests check < 0.5 px):
 # TinyRenderer samples at integer window coordinates and flips rows as H - 1 - y; OpenGL at centres.
@@ -51,7 +52,8 @@ DEFAULT_LIGHTING = Lighting((-50.0, 30.0, 100.0), (1.0, 1.0, 1.0), 0.6, 0.35, 0.
 
 @dataclass(frozen=True)
 class CameraConfig:
-    """Image size, vertical field of view, mount pitch (90 = straight down) and clip planes."""
+    """Image size, vertical field of view, mount pitch (90 = straight down), clip planes and modality (MODALITIES; the
+    render is the same, `appearance.EpisodeLook` makes a thermal image of it)."""
 
     width_px: int = 256
     height_px: int = 256
@@ -62,6 +64,7 @@ class CameraConfig:
     renderer: str = "tiny"
     mount_offset_body_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # inside the airframe box
     shadows: bool = False
+    modality: str = "rgb"
 
     def __post_init__(self) -> None:
         for name in ("width_px", "height_px"):
@@ -78,6 +81,8 @@ class CameraConfig:
             raise ValueError(f"CameraConfig.far_m must be finite and > near_m, got {self.far_m!r}")
         if self.renderer not in RENDERERS:
             raise ValueError(f"CameraConfig.renderer must be one of {RENDERERS}, got {self.renderer!r}")
+        if self.modality not in MODALITIES:
+            raise ValueError(f"CameraConfig.modality must be one of {MODALITIES}, got {self.modality!r}")
         offset = self.mount_offset_body_m
         if len(offset) != 3 or not all(math.isfinite(v) for v in offset):
             raise ValueError(f"CameraConfig.mount_offset_body_m must be three finite values, got {offset!r}")
