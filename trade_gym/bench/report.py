@@ -4,39 +4,15 @@ paper-shaped pivot of its kind (Table 1, Table 2, the tracking comparison, the f
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M, FAIL_TRACKED_FRACTION
-from trade_gym.bench.summary import config_label, wilson_interval
+from trade_gym.bench.summary import config_label
+from trade_gym.bench.tables import MISSING, fmt, mean_pm, pooled_mean, rate_cell, table, with_frames
 from trade_gym.metrics import GROUND_OFF_M
 
 Record = dict[str, Any]
-MISSING = "–"
-
-
-def fmt(value: float | None, digits: int = 3) -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return MISSING
-    return f"{value:.{digits}g}" if abs(value) >= 10 ** digits else f"{value:.{digits}f}".rstrip("0").rstrip(".")
-
-
-def mean_pm(stats: dict[str, float], digits: int = 3) -> str:
-    """'mean ± std' (std omitted for a single run)."""
-    if not stats["n"]:
-        return MISSING
-    std = stats["std"]
-    return fmt(stats["mean"], digits) + (f" ± {fmt(std, digits)}" if math.isfinite(std) else "")
-
-
-def with_frames(rmse: float | None, frames: int) -> str:
-    """A pooled depth RMSE with the number of frames it pools, 'rmse [frames]'."""
-    return f"{fmt(rmse)} [{frames}]"
-
-
-def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
-    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + ["| " + " | ".join(r) + " |" for r in rows]
 
 
 def generic_table(records: Sequence[Record]) -> list[str]:
@@ -207,20 +183,7 @@ def latency_pivot(records: Sequence[Record]) -> list[str]:
     return table(["scene", "follower"] + [f"{fmt(v)} ms: error [m] / tracked (visible)" for v in latencies], rows)
 
 
-def pooled_mean(records: Sequence[Record], metric: str) -> tuple[float, int]:
-    """The mean of `metric` over every run of `records` (each record's mean weighted by its run count), and n."""
-    stats = [r["metrics"][metric] for r in records if r["metrics"][metric]["n"]]
-    n = sum(s["n"] for s in stats)
-    return (sum(s["mean"] * s["n"] for s in stats) / n if n else math.nan), n
-
-
 BREADTH_AXES = ("target_motion", "appearance")  # the breadth groups' switch grid
-
-
-def rate_cell(rate: float, n: int) -> str:
-    """A success rate with its 95 % Wilson interval and its runs: 'rate [low, high] (n)'."""
-    low, high = wilson_interval(rate, n)
-    return f"{fmt(rate, 2)} [{fmt(low, 2)}, {fmt(high, 2)}] ({n})" if n else f"{MISSING} (0)"
 
 
 def _breadth_cell(records: Sequence[Record], cell: tuple[str, ...]) -> list[Record]:
