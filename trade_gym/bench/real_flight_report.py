@@ -70,7 +70,8 @@ def real_flight_pivot(records: Sequence[Record]) -> list[str]:
                "interval and (runs). The following band assumes a downward camera: with a pitched one the waypoint "
                "follower holds h / tan(pitch) behind the target (h at 45 deg), outside the band, so success is no "
                "measure of following here.")
-    return [caption, ""] + table(header, rows) + [""] + gate_table(records)
+    gate = gate_table(records)
+    return [caption, ""] + table(header, rows) + ([""] + gate if gate else [])
 
 
 def gate_table(records: Sequence[Record]) -> list[str]:
