@@ -67,9 +67,8 @@ def real_flight_pivot(records: Sequence[Record]) -> list[str]:
                                          for what in ("tracked", "success", "collision")]
     caption = ("Tracked: the fraction of visible frames with IoU >= 0.3, mean ± std over worlds; success (no "
                "collision, in the following band on >= 90 % of frames) and collision rates with their 95 % Wilson "
-               "interval and (runs). The following band assumes a downward camera: with a pitched one the waypoint "
-               "follower holds h / tan(pitch) behind the target (h at 45 deg), outside the band, so success is no "
-               "measure of following here.")
+               "interval and (runs). At 45 deg pitch the band is centred one follow height behind the target, "
+               "where the camera centres it (`trade_gym.scoring.FollowBand`).")
     gate = gate_table(records)
     return [caption, ""] + table(header, rows) + ([""] + gate if gate else [])
 
