@@ -1,10 +1,12 @@
-"""Render docs/img/thermal_montage.png: the reset frame of each scene's development world 3 in RGB and through the
-thermal camera at night (2 h), at the morning crossover and by day (13 h), in the false colour of `render()`.
+"""Render docs/img/thermal_montage.png: one frame of each scene's development world 3 as the real-flight suite's camera
+sees it (45 deg pitch, the waypoint follower settled behind the target on oracle estimates, so every column flies the
+same path), in RGB and through the thermal camera at the suite's times of day: night (2 h), the morning crossover and
+day (13 h), in the false colour of `render()`.
 
-The crossover hour is computed per scene from the thermal scene's model: the morning hour at which the target's parked
-twin (its material, the mean albedo of its pixels) comes closest to the terrain's temperature (its material and mean
-albedo), both horizontal (a white truck never gets as warm as dark asphalt: then the closest approach).
-Deterministic: re-running reproduces the same PNG. Usage: python scripts/thermal_montage.py [out.png]
+The hours are the library's (`trade_gym.sim.thermal_crossover.time_of_day_h`): the crossover is the morning hour at
+which the scene's target's parked twin comes closest to the terrain's temperature (a white truck never gets as warm as
+dark asphalt: then the closest approach). Deterministic: re-running reproduces the same PNG.
+Usage: python scripts/thermal_montage.py [out.png]
 """
 
 from __future__ import annotations
@@ -19,39 +21,21 @@ from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import trade_gym  # noqa: E402, F401  (registers TradeFollow-v0)
+from trade_gym.agents import WaypointFollower, WaypointFollowerConfig  # noqa: E402
 from trade_gym.annotate import display_image  # noqa: E402
-from trade_gym.sim.thermal_camera import TERRAIN_MATERIAL, UNLIT  # noqa: E402
-from trade_gym.sim.thermal_scene import SurfaceModel, ThermalLook, albedo_from_unlit_rgb  # noqa: E402
+from trade_gym.bench.suites import REAL_FLIGHT_ENV  # noqa: E402
+from trade_gym.sim.thermal_crossover import TIMES_OF_DAY, morning_crossover, time_of_day_h  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "img" / "thermal_montage.png"
 SCENES = ("desert", "mountain", "city")
 WORLD_SEED, RESET_SEED = 3, 1  # a development world
-NIGHT_H, DAY_H = 2.0, 13.0
-CROSSOVER_SEARCH_H = (5.0, 11.0)
-CROSSOVER_STEP_H = 0.05
 IMAGE_PX = 176
 PALETTE_COLOURS = 256  # the PNG is written with a palette of this many colours (keeps it small)
 LABEL_SCALE, LABEL_ORIGIN_PX = 0.42, (5, 15)
-ENV = dict(perception="oracle", render_oracle_frames=True, camera_size=IMAGE_PX, world_seed=WORLD_SEED)
-
-
-def crossover_h(scene: str) -> float:
-    """The morning hour at which the target's parked twin and the terrain are nearest in temperature (see above)."""
-    env = gym.make("TradeFollow-v0", scene=scene, **ENV)
-    try:
-        env.reset(seed=RESET_SEED)
-        base = env.unwrapped
-        frame = base.camera.render(base.true_camera_pose, UNLIT)
-        world, albedo = base.world, albedo_from_unlit_rgb(frame.rgb)
-        vehicle = float(albedo[frame.seg == world.target.body_id].mean())
-        ground = float(albedo[np.isin(frame.seg, world.body_ids_by_role["terrain"])].mean())
-        kind, terrain = world.target.kind, TERRAIN_MATERIAL[world.spec.ground_texture]
-    finally:
-        env.close()
-    hours = np.arange(*CROSSOVER_SEARCH_H, CROSSOVER_STEP_H)
-    contrast = [SurfaceModel(ThermalLook(float(h))).material_temperature_k(kind, vehicle)
-                - SurfaceModel(ThermalLook(float(h))).material_temperature_k(terrain, ground) for h in hours]
-    return float(hours[int(np.argmin(np.abs(contrast)))])
+# the suite's camera (pitch) and follower on a development world, rendered without running perception
+ENV = dict(perception="oracle", render_oracle_frames=True, camera_size=IMAGE_PX, world_seed=WORLD_SEED,
+           camera_pitch_deg=dict(REAL_FLIGHT_ENV)["camera_pitch_deg"], action_mode="waypoint")
+SETTLE_STEPS = 90  # frames flown before the one shown (3 s: the follower has backed off to its place behind the target)
 
 
 def frame(scene: str, time_h: float | None, label: str) -> np.ndarray:
@@ -59,7 +43,10 @@ def frame(scene: str, time_h: float | None, label: str) -> np.ndarray:
     thermal = {} if time_h is None else dict(camera_modality="thermal", time_of_day_h=time_h)
     env = gym.make("TradeFollow-v0", scene=scene, **ENV, **thermal)
     try:
-        env.reset(seed=RESET_SEED)
+        obs, _ = env.reset(seed=RESET_SEED)
+        follower = WaypointFollower(WaypointFollowerConfig.of(env.unwrapped.config))
+        for _ in range(SETTLE_STEPS):
+            obs = env.step(follower.predict(obs)[0])[0]
         image = display_image(env.unwrapped.camera_frame.rgb, env.unwrapped.config.camera_modality).copy()
     finally:
         env.close()
@@ -72,10 +59,11 @@ def frame(scene: str, time_h: float | None, label: str) -> np.ndarray:
 def main(out: Path) -> None:
     rows = []
     for scene in SCENES:
-        dawn = crossover_h(scene)
-        print(f"{scene}: crossover at {dawn:.2f} h")
-        looks = ((None, f"{scene} rgb"), (NIGHT_H, f"night {NIGHT_H:.2f} h"), (dawn, f"crossover {dawn:.2f} h"),
-                 (DAY_H, f"day {DAY_H:.2f} h"))
+        crossover = morning_crossover(scene)
+        print(f"{scene}: crossover at {crossover.time_h:.2f} h, parked target minus terrain {crossover.contrast_k:+.2f} K"
+              f"{'' if crossover.crosses else ' (closest approach: they do not cross)'}")
+        hours = {name: time_of_day_h(scene, name) for name in TIMES_OF_DAY}
+        looks = ((None, f"{scene} rgb"), *((hour, f"{name} {hour:.2f} h") for name, hour in hours.items()))
         rows.append(np.concatenate([frame(scene, t, label) for t, label in looks], axis=1))
     out.parent.mkdir(parents=True, exist_ok=True)
     montage = Image.fromarray(np.concatenate(rows, axis=0)).quantize(PALETTE_COLOURS, dither=Image.Dither.NONE)

@@ -212,7 +212,7 @@ class TradeFollowEnv(gym.Env):
         thermal = thermal_camera(heat_rng, self.world, self.camera.intrinsics, cfg.thermal, cfg.time_of_day_h,
                                  cfg.appearance == "randomized")
         self._look = EpisodeLook(look_rng, self.world, self.camera, thermal)
-        self._follow_band = follow_band(self.world.spec.follow_altitude_agl_m, cfg.camera_fov_deg)  # reward, info
+        self._follow_band = follow_band(self.world.spec.follow_altitude_agl_m, cfg.camera_fov_deg, cfg.camera_pitch_deg)
         start_position, start_yaw = self.world.drone_start()
         self.quadrotor.spawn(start_position, start_yaw)
         self._state = self.quadrotor.read_state()

@@ -173,8 +173,10 @@ def depth_off_fraction(infos: Sequence[Info], kind: str, threshold_m: float = GR
 
 
 def initial_iou(infos: Sequence[Info]) -> float:
-    """IoU of the first step's estimate with the true box (a wrong initial box shows here)."""
-    return float(infos[0]["iou"]) if infos else float("nan")
+    """IoU with the true box of the first estimate the observation holds (a wrong initial box shows here): the first
+    step's, or under a perception latency (the light stack's) the first that arrived; NaN when none did."""
+    first = next((i for i in infos if np.all(np.isfinite(i["est_bbox"]))), None)
+    return float("nan") if first is None else float(first["iou"])
 
 
 def depth_frames(infos: Sequence[Info], kind: str) -> int:

@@ -6,7 +6,7 @@ The terms sum to the reward (each is in `info["reward_<term>"]`):
   paid for what happens, not for what perception believes). It keeps the reward of a good frame positive,
   so ending the episode early never pays.
 - `distance`: `-distance_weight * (s min(d / r, 1) + (1 - s) min(d / h, 1))`, d the horizontal distance from
-  the drone to the target, r the following band's distance (`trade_gym.scoring.FollowBand`: a quarter of the
+  the drone to the target less the band's standoff (0 with the downward camera; see `FollowBand`), r the following band's distance (`trade_gym.scoring.FollowBand`: a quarter of the
   camera footprint's half-width at the follow height, 4-11 m across the scenes), h the scene's follow height
   and s `band_distance_share`. The band part makes letting the target leave the band cost most of the bonus;
   the follow-height part keeps a pull towards the target from farther off, where the band part is flat. A
@@ -70,12 +70,21 @@ class RewardInputs:
     follow_distance_m: float  # the following band's horizontal distance (`trade_gym.scoring.FollowBand`)
     action: Sequence[float]  # the ACTION_DIM values applied (`trade_gym.action.clip_action`); () at the reset
     crashed: bool
+    # the horizontal distance [m] at which the camera centres the target (`trade_gym.scoring.FollowBand`): 0 for a
+    # downward camera, the follow height over tan(pitch) for a pitched one
+    standoff_m: float = 0.0
+
+    @property
+    def follow_error_m(self) -> float:
+        """How far [m] the drone's horizontal distance to the target is from the standoff (its distance with a
+        downward camera)."""
+        return abs(self.horizontal_distance_m - self.standoff_m)
 
 
 def compute_reward(config: RewardConfig, x: RewardInputs) -> tuple[float, dict[str, float]]:
     """(total, terms) of one frame; the terms sum to the total."""
     h = x.follow_height_m
-    share, d = config.band_distance_share, x.horizontal_distance_m
+    share, d = config.band_distance_share, x.follow_error_m
     distance_error = (share * min(d / x.follow_distance_m, RELATIVE_ERROR_CAP)
                       + (1.0 - share) * min(d / h, RELATIVE_ERROR_CAP))
     height_error = min(abs(x.height_above_target_ground_m - h) / h, RELATIVE_ERROR_CAP)

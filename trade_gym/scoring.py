@@ -122,34 +122,41 @@ class EnvFrame:
 
 FOLLOW_BAND_FOOTPRINT_FRACTION = 0.25  # of the footprint's half-width: the target in the image's central quarter
 FOLLOW_BAND_HEIGHT_FRACTION = 0.25  # of the follow height
+NADIR_PITCH_DEG = 90.0  # a camera looking straight down (`EnvConfig.camera_pitch_deg`)
 
 
 @dataclass(frozen=True)
 class FollowBand:
     """EVT-style following band, from the follow geometry: on a frame the drone follows when the target is in view,
-    its horizontal distance to the target is at most a quarter of the camera footprint's half-width at the follow
+    its horizontal distance to the target is within a quarter of the camera footprint's half-width at the follow
     height h, h tan(fov / 2) / 4 (4-11 m across the scenes: room for a follower's lag in a turn, while a drone that
-    lets the target drift into the image's outer part, e.g. by hovering, leaves the band), and its height above
-    the target's ground is within 25 % of h (the target's image scale within 25 % of the follow geometry's)."""
+    lets the target drift into the image's outer part, e.g. by hovering, leaves the band), of the standoff, and its
+    height above the target's ground is within 25 % of h (the target's image scale within 25 % of the follow
+    geometry's). The standoff is where the camera's optical axis meets the target's ground from the follow height:
+    0 for a downward camera, h / tan(pitch) for one pitched `camera_pitch_deg` below the horizon (the paper's
+    real flight: 45 deg, one follow height behind). The band's width keeps the downward camera's rule."""
 
     follow_height_m: float
     max_distance_m: float
+    standoff_m: float = 0.0
 
     @classmethod
-    def of(cls, follow_height_m: float, camera_fov_deg: float) -> FollowBand:
+    def of(cls, follow_height_m: float, camera_fov_deg: float, camera_pitch_deg: float = NADIR_PITCH_DEG) -> FollowBand:
         half_width_m = follow_height_m * math.tan(math.radians(camera_fov_deg) / 2.0)
-        return cls(follow_height_m, FOLLOW_BAND_FOOTPRINT_FRACTION * half_width_m)
+        standoff_m = (follow_height_m / math.tan(math.radians(camera_pitch_deg)) if camera_pitch_deg < NADIR_PITCH_DEG
+                      else 0.0)
+        return cls(follow_height_m, FOLLOW_BAND_FOOTPRINT_FRACTION * half_width_m, standoff_m)
 
     def holds(self, x: RewardInputs) -> bool:
         height_error = abs(x.height_above_target_ground_m - self.follow_height_m)
-        return bool(x.target_visible and x.horizontal_distance_m <= self.max_distance_m
+        return bool(x.target_visible and x.follow_error_m <= self.max_distance_m
                     and height_error <= FOLLOW_BAND_HEIGHT_FRACTION * self.follow_height_m)
 
 
 @functools.lru_cache(maxsize=16)
-def follow_band(follow_height_m: float, camera_fov_deg: float) -> FollowBand:
+def follow_band(follow_height_m: float, camera_fov_deg: float, camera_pitch_deg: float = NADIR_PITCH_DEG) -> FollowBand:
     """The scene's following band (cached: an env asks for it every step)."""
-    return FollowBand.of(follow_height_m, camera_fov_deg)
+    return FollowBand.of(follow_height_m, camera_fov_deg, camera_pitch_deg)
 
 
 def env_info(truth: GroundTruth, held: ScoredEstimate, frame: EnvFrame, visible_fraction_threshold: float,
@@ -186,4 +193,4 @@ def reward_inputs(truth: GroundTruth, world: World, band: FollowBand, drone_posi
         height_above_target_ground_m=float(drone[2] - world.ground_height_m(float(target[0]), float(target[1]))),
         follow_height_m=band.follow_height_m,
         follow_distance_m=band.max_distance_m,
-        action=action, crashed=crashed)
+        action=action, crashed=crashed, standoff_m=band.standoff_m)

@@ -137,6 +137,13 @@ def test_empty_estimate_track_scores_zero_and_whole_episode_lost():
     assert math.isnan(scores["ground_depth_rmse_m"]) and scores["ground_depth_frames"] == 0
 
 
+def test_initial_iou_is_the_first_arriving_estimates_also_when_a_latency_holds_it_back():
+    assert metrics.initial_iou([info(iou=0.7), info(iou=0.2)]) == 0.7
+    late = [info(iou=0.0, est=NO_BOX), info(iou=0.0, est=NO_BOX), info(iou=0.8), info(iou=0.1)]
+    assert metrics.initial_iou(late) == 0.8  # not the 0 of the first steps, which held no estimate yet
+    assert math.isnan(metrics.initial_iou([info(iou=0.0, est=NO_BOX)]))
+
+
 def test_episode_metrics_keys_match_metric_names():
     assert tuple(metrics.episode_metrics([info()])) == metrics.METRIC_NAMES
 

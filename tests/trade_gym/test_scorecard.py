@@ -90,3 +90,18 @@ def test_an_occlusion_gives_absent_frames_that_adq_scores():
     assert absent > metrics.ADQ_MIN_ABSENT_FRAMES, classes
     adq = metrics.absence_detection_quality(infos)
     assert 0.0 <= adq <= 1.0 and classes["tracked"] > 0, classes
+
+
+def test_a_pitched_camera_moves_the_band_to_its_standoff():
+    """With the camera pitched 45 deg the target is centred one follow height behind it: the band is centred on that
+    standoff (a drone right above the target is out of it), and the reward's distance error is measured from it; a
+    downward camera's standoff is exactly 0 (the band as before)."""
+    assert FollowBand.of(H, FOV).standoff_m == 0.0
+    band = FollowBand.of(H, FOV, 45.0)
+    assert band.standoff_m == pytest.approx(H) and band.max_distance_m == FollowBand.of(H, FOV).max_distance_m
+
+    def inputs(distance_m: float) -> RewardInputs:
+        return RewardInputs(True, distance_m, H, H, band.max_distance_m, np.zeros(4), False, band.standoff_m)
+    assert band.holds(inputs(H)) and band.holds(inputs(H + 0.9 * band.max_distance_m))
+    assert not band.holds(inputs(0.0)) and not band.holds(inputs(H + 1.1 * band.max_distance_m))
+    assert inputs(H).follow_error_m == pytest.approx(0.0, abs=1e-9) and inputs(0.0).follow_error_m == pytest.approx(H)

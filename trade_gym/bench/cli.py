@@ -21,8 +21,8 @@ from trade_gym.bench.results import (SERIES_FILE, build_document, collect_meta, 
                                      to_json_safe, write_json, write_series)
 from trade_gym.bench.runner import RunResult, run_all, run_spec
 from trade_gym.bench.splits import EVALUATION, TRAINING
-from trade_gym.bench.suites import (BOOL_SWITCHES, EVALUATION_SUITES, SUITE_JOBS, SUITES, RunSpec, Selection,
-                                    expand_suite)
+from trade_gym.bench.suites import (BOOL_SWITCHES, EVALUATION_SUITES, NAMED_AXES, SUITE_JOBS, SUITES, RunSpec,
+                                    Selection, expand_suite, named_axis_kwargs)
 from trade_gym.bench.summary import summarise
 from trade_gym.cli_args import OneLineParser, UsageError, parse_switch
 from trade_gym.config import PERCEPTION_MODES, POSE_SOURCES, SCENE_NAMES, EnvConfig
@@ -46,7 +46,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "learned, TRADE and DCF, 5 evaluation worlds per scene, 1080 runs, ~2.6 h with --jobs 2), breadth-tuning "
                    "(the breadth grid on 5 training worlds per scene, to find failures and tune on), unseen-depth "
                    "(the depth failure finder: ground depth on 40 training and the 20 evaluation worlds per scene, "
-                   "720 runs; a strip of frames per failed world), full "
+                   "720 runs; a strip of frames per failed world), real-flight (the paper's onboard setup: thermal camera at "
+                   "45 deg, light stack, waypoint follower, vio pose, TRADE and DCF at night, the morning crossover and "
+                   "by day on the 20 evaluation worlds per scene, 360 runs, ~1.5 h with --jobs 2), full "
                    "(paper tables at full length plus all followers, hours)")
     p.add_argument("--tables", nargs="+", metavar="GROUP", help="groups of the suite to run (see --list); with "
                    "--report, the groups of the earlier run to render (and --scenes its scenes)")
@@ -55,7 +57,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--perceptions", nargs="+", choices=PERCEPTION_MODES)
     p.add_argument("--pose-sources", nargs="+", choices=POSE_SOURCES)
     p.add_argument("--ablation", action="append", default=[], metavar="SWITCH=VALUE",
-                   help=f"env switch ({', '.join(BOOL_SWITCHES)}) = true|false|both; repeatable")
+                   help=f"env switch ({', '.join(BOOL_SWITCHES)}) = true|false|both, or a named axis = one or more of "
+                   f"its names, comma-separated ({'; '.join(f'{n}: ' + '|'.join(a.names) for n, a in NAMED_AXES.items())}"
+                   "; the real-flight suite's); repeatable")
     p.add_argument("--seeds", nargs=2, type=int, metavar=("FIRST", "LAST"), help="seed range, inclusive")
     p.add_argument("--steps", type=int, help="episode length [frames at 30 Hz]")
     p.add_argument("--camera-size", type=int, help="camera image side [px]")
@@ -90,7 +94,7 @@ def _selection(args: argparse.Namespace) -> Selection:
                 raise UsageError(f"unknown policy {name!r} (choose from {', '.join(POLICY_NAMES)})")
         if "learned" in args.policies and (reason := learned_unavailable_reason()) is not None:
             raise UsageError(f"policy 'learned' is not available: {reason}")
-    switches = [parse_switch(item, BOOL_SWITCHES, allow_both=True) for item in args.ablation]
+    switches = [_ablation(item) for item in args.ablation]
     if args.seeds is not None and not 0 <= args.seeds[0] <= args.seeds[1]:
         raise UsageError(f"--seeds FIRST LAST needs 0 <= FIRST <= LAST, got {args.seeds[0]} {args.seeds[1]}")
     minimums = (("--steps", args.steps, MIN_STEPS), ("--camera-size", args.camera_size, MIN_CAMERA_PX),
@@ -107,6 +111,26 @@ def _selection(args: argparse.Namespace) -> Selection:
     return Selection(_tuple(args.scenes), _tuple(args.policies), _tuple(args.perceptions), _tuple(args.pose_sources),
                      tuple(switches), _tuple(args.tables), None if args.seeds is None else tuple(args.seeds),
                      args.steps, args.camera_size)
+
+
+def _ablation(item: str) -> tuple[str, tuple[Any, ...]]:
+    """`--ablation NAME=VALUE`: a bool switch (`parse_switch`), or a named axis (`NAMED_AXES`) with one or more of
+    its names, comma-separated; a UsageError naming the item otherwise."""
+    name, _, value = item.partition("=")
+    axis = NAMED_AXES.get(name)
+    if axis is None:
+        return parse_switch(item, (*BOOL_SWITCHES, *NAMED_AXES), allow_both=True)
+    names = tuple(dict.fromkeys(value.split(",")))
+    if unknown := [n for n in names if n not in axis.names]:
+        raise UsageError(f"--ablation {item!r}: {name} takes {', '.join(axis.names)} (comma-separated), "
+                         f"got {unknown[0]!r}")
+    return name, names
+
+
+def _listed(spec: RunSpec) -> str:
+    """A run's line of --list: its id, length and camera size, and what its named axes resolve to (e.g. the hour)."""
+    named = "".join(f", {k}={v:g}" for k, v in named_axis_kwargs(spec.scene, spec.switches).items())
+    return f"{spec.run_id} ({spec.steps} steps, {spec.camera_size} px{named})"
 
 
 def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:
@@ -284,7 +308,7 @@ def write_outputs(args: argparse.Namespace, results: list[RunResult], meta: dict
     document = build_document(results, summary, meta, names, video)
     titles = {g.name: g.title for g in SUITES.get(meta["suite"] or "", ())}
     failures = [f"{r.spec.run_id}: {r.error}" for r in results if r.error]
-    markdown = report.render_markdown(summary, meta, titles, failures, names)
+    markdown = report.render_markdown(summary, meta, titles, failures, names, results)
     (out / "results.md").write_text(markdown)
     print(report.headline(markdown))  # the score tables on stdout; progress and errors go to stderr
     write_json(out / "results.json", document)
@@ -373,7 +397,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         validate_runs(specs)
         check_worlds(args.suite, specs)
         if args.list:
-            print("\n".join(s.run_id + f" ({s.steps} steps, {s.camera_size} px)" for s in specs))
+            print("\n".join(_listed(s) for s in specs))
             return 0
         _check_paths(args, selection)
         _check_record(args, specs)

@@ -9,9 +9,9 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M
-from trade_gym.bench.report import MISSING, fmt, pooled_mean, table
 from trade_gym.bench.runner import RunResult
 from trade_gym.bench.summary import metric_stats, metric_values, pooled_rmse, summarise
+from trade_gym.bench.tables import MISSING, fmt, pooled_mean, table
 
 Record = dict[str, Any]
 # The paper's Table 1, full TRADE: pooled ground-depth RMSE [m] with (ground-truth, VIO) pose per scene.

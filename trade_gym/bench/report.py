@@ -4,39 +4,19 @@ paper-shaped pivot of its kind (Table 1, Table 2, the tracking comparison, the f
 
 from __future__ import annotations
 
-import math
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M, FAIL_TRACKED_FRACTION
-from trade_gym.bench.summary import config_label, wilson_interval
+from trade_gym.bench.real_flight_report import real_flight_pivot, real_flight_worlds
+from trade_gym.bench.summary import config_label
+from trade_gym.bench.tables import MISSING, fmt, mean_pm, pooled_mean, rate_cell, table, with_frames
 from trade_gym.metrics import GROUND_OFF_M
 
+if TYPE_CHECKING:
+    from trade_gym.bench.runner import RunResult
+
 Record = dict[str, Any]
-MISSING = "–"
-
-
-def fmt(value: float | None, digits: int = 3) -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return MISSING
-    return f"{value:.{digits}g}" if abs(value) >= 10 ** digits else f"{value:.{digits}f}".rstrip("0").rstrip(".")
-
-
-def mean_pm(stats: dict[str, float], digits: int = 3) -> str:
-    """'mean ± std' (std omitted for a single run)."""
-    if not stats["n"]:
-        return MISSING
-    std = stats["std"]
-    return fmt(stats["mean"], digits) + (f" ± {fmt(std, digits)}" if math.isfinite(std) else "")
-
-
-def with_frames(rmse: float | None, frames: int) -> str:
-    """A pooled depth RMSE with the number of frames it pools, 'rmse [frames]'."""
-    return f"{fmt(rmse)} [{frames}]"
-
-
-def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
-    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + ["| " + " | ".join(r) + " |" for r in rows]
 
 
 def generic_table(records: Sequence[Record]) -> list[str]:
@@ -207,20 +187,7 @@ def latency_pivot(records: Sequence[Record]) -> list[str]:
     return table(["scene", "follower"] + [f"{fmt(v)} ms: error [m] / tracked (visible)" for v in latencies], rows)
 
 
-def pooled_mean(records: Sequence[Record], metric: str) -> tuple[float, int]:
-    """The mean of `metric` over every run of `records` (each record's mean weighted by its run count), and n."""
-    stats = [r["metrics"][metric] for r in records if r["metrics"][metric]["n"]]
-    n = sum(s["n"] for s in stats)
-    return (sum(s["mean"] * s["n"] for s in stats) / n if n else math.nan), n
-
-
 BREADTH_AXES = ("target_motion", "appearance")  # the breadth groups' switch grid
-
-
-def rate_cell(rate: float, n: int) -> str:
-    """A success rate with its 95 % Wilson interval and its runs: 'rate [low, high] (n)'."""
-    low, high = wilson_interval(rate, n)
-    return f"{fmt(rate, 2)} [{fmt(low, 2)}, {fmt(high, 2)}] ({n})" if n else f"{MISSING} (0)"
 
 
 def _breadth_cell(records: Sequence[Record], cell: tuple[str, ...]) -> list[Record]:
@@ -274,7 +241,9 @@ def breadth_headline(summary: Sequence[Record]) -> list[str]:
 
 
 PIVOTS = {"table1": table1_pivot, "table2": table2_pivot, "tracking": tracking_pivot, "follow": follow_pivot,
-          "unseen": unseen_pivot, "latency": latency_pivot, "breadth": breadth_pivot}
+          "unseen": unseen_pivot, "latency": latency_pivot, "breadth": breadth_pivot, "real_flight": real_flight_pivot}
+# Tables of a kind made from its runs rather than its summary records (per world, and what each run was flown with)
+RUN_TABLES: dict[str, Callable[[Sequence[RunResult]], list[str]]] = {"real_flight": real_flight_worlds}
 
 
 def machine(meta: Record) -> str:
@@ -286,8 +255,8 @@ def machine(meta: Record) -> str:
 
 
 def render_markdown(summary: Sequence[Record], meta: Record, titles: dict[str, str], failures: Sequence[str],
-                    plots: Sequence[str]) -> str:
-    """The whole results.md."""
+                    plots: Sequence[str], runs: Sequence[RunResult] = ()) -> str:
+    """The whole results.md; `runs` (the summarised runs) adds the tables some kinds make from runs (`RUN_TABLES`)."""
     lines = [f"# trade-bench results{' — suite ' + meta['suite'] if meta.get('suite') else ''}", "",
              f"commit `{meta['commit']}`, {meta['date_utc']}, {machine(meta)}, "
              f"renderer {meta['renderer']}, {meta['runs']} runs in {meta['wall_s']:.0f} s with {meta['jobs']} jobs.",
@@ -302,7 +271,11 @@ def render_markdown(summary: Sequence[Record], meta: Record, titles: dict[str, s
         if pivot is None:
             lines += generic_table(records) + [""] + scorecard_table(records)
         else:
-            lines += pivot(records) + ["", "<details><summary>all configurations</summary>", ""]
+            lines += pivot(records) + [""]
+            group_runs = [r for r in runs if r.spec.group == group]
+            if records[0]["kind"] in RUN_TABLES and group_runs:
+                lines += RUN_TABLES[records[0]["kind"]](group_runs)
+            lines += ["<details><summary>all configurations</summary>", ""]
             lines += generic_table(records) + [""] + scorecard_table(records) + ["</details>", ""]
     if failures:
         lines += ["## Failed runs", ""] + [f"- {f}" for f in failures] + [""]

@@ -7,16 +7,19 @@ a `Selection` (from the command line) filters the categorical axes and overrides
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass, fields
+from types import MappingProxyType
 from typing import Any
 
 from trade_gym.bench.policies import policy_env_kwargs
 from trade_gym.bench.splits import DEVELOPMENT, EVALUATION, TRAINING
 from trade_gym.config import APPEARANCE_MODES, CAMERA_RATE_HZ, SCENE_NAMES, TARGET_MOTIONS, EnvConfig
+from trade_gym.sim.thermal_crossover import TIMES_OF_DAY, time_of_day_h
 
 Kwargs = tuple[tuple[str, Any], ...]  # sorted (name, value) pairs: hashable env keyword arguments
 # Which table a group renders in results.md (and how its runs are compared).
-GROUP_KINDS = ("follow", "tracking", "table1", "table2", "unseen", "latency", "breadth", "custom")
+GROUP_KINDS = ("follow", "tracking", "table1", "table2", "unseen", "latency", "breadth", "real_flight", "custom")
 BOOL_SWITCHES = tuple(f.name for f in fields(EnvConfig) if f.type == "bool")
 # The paper's protocol: one sequence per scene (a fixed world), each run of it with its first tracked
 # frame shifted within 10 frames and its initial box perturbed within 5 px (and its own sensor noise);
@@ -50,6 +53,35 @@ BREADTH_TUNING_WORLDS = (TRAINING.first + 200, TRAINING.first + 204)  # past the
 # evaluation world and on training worlds, whose group is the one to tune on (`--tables depth_training`).
 DEPTH_FINDER_TRAINING_WORLDS = (TRAINING.first, TRAINING.first + 39)
 DEPTH_FINDER_STEPS = 300
+# Real flight (issue 45): the paper's onboard setup (trade_paper.tex, real-time implementation): a FLIR Boson thermal
+# camera at 45 deg pitch, the light TRADE stack of the Voxl 2, waypoints sent to PX4 from the filtered target position
+# (the waypoint follower), TRADE against DCF, at night, at the scene's morning crossover and by day, on every evaluation
+# world. VIO pose: the flight had no other (xVIO ran beside TRADE on the board), and ground-truth pose would hide
+# the pose drift that the light stack's plane fit, its only depth (no ground mask, no single-image depth), suffers.
+REAL_FLIGHT_PITCH_DEG = 45.0  # the Boson's mount on the quadcopter (trade_paper.tex: "mounted with a 45 deg pitch")
+REAL_FLIGHT_ENV: Kwargs = (("camera_modality", "thermal"), ("camera_pitch_deg", REAL_FLIGHT_PITCH_DEG),
+                           ("stack", "light"))
+TIME_OF_DAY_AXIS = "time_of_day"
+
+
+@dataclass(frozen=True)
+class NamedAxis:
+    """A grid axis whose values are names, each given to the env as `keyword` by `resolve(scene, name)` (a value
+    that differs per scene); a run's id keeps the name."""
+
+    keyword: str
+    names: tuple[str, ...]
+    resolve: Callable[[str, str], Any]
+
+
+# The time of day by name (night, crossover, day): the crossover hour is the scene's own (`thermal_crossover`)
+NAMED_AXES = MappingProxyType({TIME_OF_DAY_AXIS: NamedAxis("time_of_day_h", TIMES_OF_DAY, time_of_day_h)})
+
+
+def named_axis_kwargs(scene: str, switches: Kwargs) -> dict[str, Any]:
+    """The env keyword arguments of `switches`' named axes (`NAMED_AXES`) in `scene`."""
+    return {NAMED_AXES[name].keyword: NAMED_AXES[name].resolve(scene, value) for name, value in switches
+            if name in NAMED_AXES}
 
 
 @dataclass(frozen=True)
@@ -92,7 +124,9 @@ class RunSpec:
     OWN_ENV_KEYS = ("scene", "perception", "pose_source", "camera_size", "episode_duration_s")
 
     def env_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of `TradeFollowEnv` for this run; truncation at exactly `steps` frames."""
+        """Keyword arguments of `TradeFollowEnv` for this run; truncation at exactly `steps` frames. A named axis
+        (`NAMED_AXES`) gives its keyword unless an extra fixes it (a spec read back from results.json keeps the
+        value it was flown with)."""
         return {
             "scene": self.scene,
             "perception": self.perception,
@@ -100,12 +134,16 @@ class RunSpec:
             "camera_size": self.camera_size,
             "episode_duration_s": self.steps / CAMERA_RATE_HZ,
             **policy_env_kwargs(self.policy),
+            **named_axis_kwargs(self.scene, self.switches),
             **dict(self.extra),
-            **dict(self.switches),
+            **{name: value for name, value in self.switches if name not in NAMED_AXES},
         }
 
     def switch_value(self, name: str) -> Any:
-        """The value this run gives an env keyword (its switches, then extras, then the env default)."""
+        """The value this run gives an env keyword (its switches, then extras, then the env default); a named axis's
+        name (None where the run has no such axis)."""
+        if name in NAMED_AXES:
+            return dict(self.switches).get(name)
         return dict(self.switches).get(name, dict(self.extra).get(name, getattr(EnvConfig(), name)))
 
 
@@ -125,7 +163,7 @@ class Selection:
     policies: tuple[str, ...] | None = None
     perceptions: tuple[str, ...] | None = None
     pose_sources: tuple[str, ...] | None = None
-    switches: tuple[tuple[str, tuple[bool, ...]], ...] = ()  # name -> allowed values
+    switches: tuple[tuple[str, tuple[Any, ...]], ...] = ()  # name -> allowed values (bools, or a named axis' names)
     groups: tuple[str, ...] | None = None
     seeds: tuple[int, int] | None = None
     steps: int | None = None
@@ -257,6 +295,15 @@ def _depth_finder_groups(steps: int, camera_size: int) -> tuple[GroupSpec, ...]:
         for which, worlds in (("training", DEPTH_FINDER_TRAINING_WORLDS), ("evaluation", UNSEEN_WORLDS)))
 
 
+def _real_flight_groups(steps: int, camera_size: int) -> tuple[GroupSpec, ...]:
+    return (
+        GroupSpec("real_flight", "real_flight", "Real flight: thermal camera at 45 deg, light stack, waypoint "
+                  "follower, VIO pose; TRADE against DCF at night, at the morning crossover and by day, one run per "
+                  "evaluation world", ALL_SCENES, ("waypoint",), ("trade", "dcf"), ("vio",), UNSEEN_WORLDS, steps,
+                  camera_size, ((TIME_OF_DAY_AXIS, TIMES_OF_DAY),), UNSEEN_PROTOCOL + REAL_FLIGHT_ENV),
+    )
+
+
 PAPER_STEPS, FULL_STEPS = 450, 900  # 15 s sequences (about an hour on 2 cores); the env's full 30 s
 PAPER_CAMERA_PX = 256
 
@@ -269,6 +316,7 @@ SUITES: dict[str, tuple[GroupSpec, ...]] = {
     "breadth": _breadth_groups(PAPER_STEPS, PAPER_CAMERA_PX),
     "breadth-tuning": _breadth_groups(PAPER_STEPS, PAPER_CAMERA_PX, BREADTH_TUNING_WORLDS, "training"),
     "unseen-depth": _depth_finder_groups(DEPTH_FINDER_STEPS, PAPER_CAMERA_PX),
+    "real-flight": _real_flight_groups(PAPER_STEPS, PAPER_CAMERA_PX),
     "full": _paper_groups(FULL_STEPS, PAPER_CAMERA_PX) + (
         GroupSpec("policies", "follow", "Followers on oracle and TRADE perception",
                   ALL_SCENES, ("scripted", "learned", "waypoint", "hover", "random"), ("oracle", "trade"), ("gt",),
@@ -276,10 +324,10 @@ SUITES: dict[str, tuple[GroupSpec, ...]] = {
     ),
 }
 SUITE_JOBS = {"quick": 2, "paper": 2, "unseen": 2, "tuning": 2, "latency": 2, "breadth": 2, "breadth-tuning": 2,
-              "unseen-depth": 2, "full": 2}  # default --jobs per suite
+              "unseen-depth": 2, "real-flight": 2, "full": 2}  # default --jobs per suite
 # Suites that fly evaluation worlds; no other suite or grid may (`trade_gym.bench.splits`). Besides them, they may
 # fly training worlds (the depth finder's group to tune on), never development worlds.
-EVALUATION_SUITES = ("unseen", "breadth", "unseen-depth")
+EVALUATION_SUITES = ("unseen", "breadth", "unseen-depth", "real-flight")
 
 # A run without --suite: one grid of the chosen axes, these defaults where nothing was chosen.
 CUSTOM_DEFAULTS = GroupSpec("custom", "custom", "Custom grid", ALL_SCENES, ("scripted",), ("oracle",), ("gt",),
