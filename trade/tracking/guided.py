@@ -330,21 +330,23 @@ class GuidedTracker:
         return refinement.box
 
     def _bound_by_blob(self, blob: BBox, prediction: PixelPrediction) -> None:
-        """Resize the DCF box about its centre towards `GuidedTrackerConfig.dcf_size_blob_tolerance` of the accepted
-        blob's size (square root of the area) by at most one DSST scale step (`dcf_size_from_blob`), and make this
-        frame the depth bound's reference when its depth is known (the blob has just measured the size the depth
-        bound extrapolates)."""
-        if not self.config.dcf_size_from_blob:
-            return
-        step = self.dcf.config.scale.scale_step  # from the components in use: they may be injected
-        tolerance = blob_size_tolerance(self.refiner.config.max_blob_fill_ratio, step)
-        box = self.dcf.box
+        """Move the DCF box's centre to the accepted blob's when the blob is no bigger than the DCF box (by area: one
+        target; a blob merged with a look-alike is bigger) (`dcf_centre_from_blob`), and its size (the square root of
+        the area) towards `GuidedTrackerConfig.dcf_size_blob_tolerance` of the blob's by at most one DSST scale step
+        (`dcf_size_from_blob`); with the size on, make this frame the depth bound's reference when its depth is known
+        (the blob has just measured the size the depth bound extrapolates)."""
+        cfg, box = self.config, self.dcf.box
         size_px, blob_px = math.sqrt(box.w_px * box.h_px), math.sqrt(blob.w_px * blob.h_px)
-        bounded_px = min(max(size_px, blob_px / tolerance), blob_px * tolerance)
-        bounded_px = min(max(bounded_px, size_px / step), size_px * step)
-        if bounded_px != size_px:
-            box = self.dcf.commit(box.center, bounded_px / size_px)
-        if self._depth_known(prediction):
+        recentre = cfg.dcf_centre_from_blob and blob_px <= size_px
+        bounded_px = size_px
+        if cfg.dcf_size_from_blob:
+            step = self.dcf.config.scale.scale_step  # from the components in use: they may be injected
+            tolerance = blob_size_tolerance(self.refiner.config.max_blob_fill_ratio, step)
+            bounded_px = min(max(size_px, blob_px / tolerance), blob_px * tolerance)
+            bounded_px = min(max(bounded_px, size_px / step), size_px * step)
+        if recentre or bounded_px != size_px:
+            box = self.dcf.commit(blob.center if recentre else box.center, bounded_px / size_px)
+        if cfg.dcf_size_from_blob and self._depth_known(prediction):
             self._dcf_reference = (box.w_px, prediction.depth_m)
 
     def _measured_size(self, prediction: PixelPrediction) -> tuple[float, float]:

@@ -125,6 +125,15 @@ class GuidedTrackerConfig:
     floor (city development worlds 122, 123, 125 and 129, before the first 3D fix, where the depth bound cannot
     act). The step limit is for a blob merged with a look-alike: resized to it at once, the DCF box let the fill
     test pass the next merged blobs and grew off the target (desert tuning worlds 103 and 112, the crossing car)."""
+    dcf_centre_from_blob: bool = True
+    """On a frame whose colour blob the refiner accepts, move the DCF box's centre to the blob box's before the DCF
+    learns the frame. The output box is the blob, but the DCF learned at its own peak: on a target whose DCF peaks
+    are weak (randomised looks: noise, blur, a paint close to the ground's) the peak lagged the moving target by a
+    third of its length while the blob stayed on it, the DCF learned the road behind it, and once the lag passed
+    the blob search's reach the box slid off (mountain breadth-tuning, training world 10200, stop-and-go with
+    randomised looks: the DCF centre stayed at 101 px while the blob moved from 97 to 92 px, lost at frame 17). Only
+    a blob no bigger than the DCF box (by area) moves it: a blob merged with an identical car beside the target is
+    bigger, and its centre, half-way to the car, pulled the DCF onto it (desert, training world 10200, evasive)."""
     dcf_reference_max_depth_step: float = 0.02
     """A predicted depth that differs from the last tracked frame's by more than this fraction is a new 3D estimate
     (a wrong first fix replaced, a filter converging), not motion, and makes this frame the reference of

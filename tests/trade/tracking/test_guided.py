@@ -400,3 +400,38 @@ def test_snap_finds_a_target_whose_drawn_box_is_off_by_half_its_width_beside_a_b
     unsearched = GuidedTracker(GuidedTrackerConfig(snap_init_box=True, snap_search_fraction=0.0))
     kept = iou(unsearched.init(image, drawn).as_array(), gt)
     assert found >= 0.7 and kept <= 0.5, (found, kept)  # the blob loses the blurred 1 px rim: 7 x 21 of 9 x 23
+
+
+class _LaggingDcf(DcfTracker):
+    """A DCF whose peaks lag the target by `lag_px` (x, y) (weak peaks on a target whose looks barely stand out)."""
+
+    def __init__(self, config: DcfConfig, lag_px: tuple[float, float]) -> None:
+        super().__init__(config)
+        self.lag_px = np.asarray(lag_px, dtype=np.float64)
+
+    def response(self, *args, **kwargs):
+        response = super().response(*args, **kwargs)
+        return replace(response, origin_px=response.origin_px - self.lag_px)
+
+
+@pytest.mark.parametrize("from_blob", [True, False])
+def test_an_accepted_blob_recentres_the_dcf_box_on_the_target(from_blob):
+    """A car driving 2 px per frame and a DCF whose peak lags it by 4 px: with `dcf_centre_from_blob` the DCF box
+    is moved to each accepted blob's centre and learns the car there, and the car is tracked throughout; without it
+    the DCF learns the ground behind the car and the box slides off it."""
+    ground, start_px, velocity_px = textured_ground()[:IMAGE_PX, :IMAGE_PX], np.array([60.0, 70.0]), np.array([2.0, 0.0])
+    dcf = _LaggingDcf(DcfConfig(), (4.0, 0.0))
+    tracker = GuidedTracker(GuidedTrackerConfig(dcf_centre_from_blob=from_blob), dcf=dcf)
+    image = ground.copy()
+    tracker.init(image, BBox.from_array(draw_car(image, start_px)))
+    overlaps, offsets_px = [], []
+    for k in range(1, 21):
+        image = ground.copy()
+        gt = draw_car(image, start_px + k * velocity_px)
+        frame = tracker.step(image, PixelPrediction.none())
+        overlaps.append(iou(frame.box.as_array(), gt) if frame.tracked else 0.0)
+        offsets_px.append(float(np.linalg.norm(dcf.box.center - frame.box.center)))
+    if from_blob:
+        assert min(overlaps) > 0.5 and max(offsets_px) == pytest.approx(0.0, abs=1e-9)
+    else:
+        assert min(overlaps) < 0.3
