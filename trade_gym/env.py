@@ -213,7 +213,7 @@ class TradeFollowEnv(gym.Env):
                                  cfg.appearance == "randomized")
         self._look = EpisodeLook(look_rng, self.world, self.camera, thermal)
         self._follow_band = follow_band(self.world.spec.follow_altitude_agl_m, cfg.camera_fov_deg, cfg.camera_pitch_deg)
-        start_position, start_yaw = self.world.drone_start()
+        start_position, start_yaw = self.world.drone_start(cfg.camera_pitch_deg)
         self.quadrotor.spawn(start_position, start_yaw)
         self._state = self.quadrotor.read_state()
         self.imu = Imu(self.imu_config, rng)

@@ -24,6 +24,7 @@ from trade_gym.ground_truth import GroundTruth
 from trade_gym.metrics import depth_or_none, on_decoy
 from trade_gym.perception.base import FloatArray, GroundEstimate, PerceptionOutput
 from trade_gym.reward import RewardInputs
+from trade_gym.sim.camera import NADIR_PITCH_DEG, standoff_m
 
 if TYPE_CHECKING:
     from trade_gym.sim.world import World
@@ -122,7 +123,6 @@ class EnvFrame:
 
 FOLLOW_BAND_FOOTPRINT_FRACTION = 0.25  # of the footprint's half-width: the target in the image's central quarter
 FOLLOW_BAND_HEIGHT_FRACTION = 0.25  # of the follow height
-NADIR_PITCH_DEG = 90.0  # a camera looking straight down (`EnvConfig.camera_pitch_deg`)
 
 
 @dataclass(frozen=True)
@@ -143,9 +143,8 @@ class FollowBand:
     @classmethod
     def of(cls, follow_height_m: float, camera_fov_deg: float, camera_pitch_deg: float = NADIR_PITCH_DEG) -> FollowBand:
         half_width_m = follow_height_m * math.tan(math.radians(camera_fov_deg) / 2.0)
-        standoff_m = (follow_height_m / math.tan(math.radians(camera_pitch_deg)) if camera_pitch_deg < NADIR_PITCH_DEG
-                      else 0.0)
-        return cls(follow_height_m, FOLLOW_BAND_FOOTPRINT_FRACTION * half_width_m, standoff_m)
+        return cls(follow_height_m, FOLLOW_BAND_FOOTPRINT_FRACTION * half_width_m,
+                   standoff_m(follow_height_m, camera_pitch_deg))
 
     def holds(self, x: RewardInputs) -> bool:
         height_error = abs(x.height_above_target_ground_m - self.follow_height_m)

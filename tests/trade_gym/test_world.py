@@ -380,3 +380,18 @@ def test_bullet_list_same_shape_refills_the_same_list_objects():
     assert bullet_list("test_vertices", np.ones((5, 3))) is not first  # another shape, another list
     with pytest.raises(ValueError, match="test_bad"):
         bullet_list("test_bad", np.zeros((2, 2, 2)))
+
+
+@pytest.mark.parametrize("scene", ["desert", "mountain", "city"])
+def test_a_pitched_camera_starts_its_standoff_behind_at_the_same_height(client, scene):
+    """At 45 deg pitch the drone starts one height above the ground behind the downward camera's start, against its
+    yaw, at the same height above the ground there; at 90 deg (the default) the start is the scene's."""
+    world = _build(client, scene)
+    nadir, yaw = world.drone_start()
+    assert np.array_equal(world.drone_start(90.0)[0], nadir)
+    height_m = nadir[2] - world.ground_height_m(float(nadir[0]), float(nadir[1]))
+    pitched, pitched_yaw = world.drone_start(45.0)
+    back_m = (nadir[:2] - pitched[:2]) @ np.array([np.cos(yaw), np.sin(yaw)])
+    assert pitched_yaw == yaw and back_m == pytest.approx(height_m) and np.linalg.norm(nadir[:2] - pitched[:2]) == \
+        pytest.approx(height_m)
+    assert pitched[2] - world.ground_height_m(float(pitched[0]), float(pitched[1])) == pytest.approx(height_m)

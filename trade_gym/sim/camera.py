@@ -19,6 +19,7 @@ from trade_gym.sim.mesh_files import draw_meshes_from_files
 FloatArray = npt.NDArray[np.float64]
 
 RENDERERS = ("tiny", "egl")
+NADIR_PITCH_DEG = 90.0  # a camera looking straight down (`CameraConfig.pitch_deg`, `EnvConfig.camera_pitch_deg`)
 MODALITIES = ("rgb", "thermal")  # what the camera images: visible light, or long-wave infrared (`thermal_camera`)
 # Where each renderer samples pixel (u, v) (OpenCV, row 0 on top): NDC x = 2 (u + du) / W - 1,
 # NDC y = 1 - 2 (v + dv) / H. Measured by rendering markers at known points (tests check < 0.5 px):
@@ -98,6 +99,14 @@ class CameraFrame:
     seg: npt.NDArray[np.int32]
     T_world_cam: Pose
     intrinsics: CameraIntrinsics
+
+
+def standoff_m(height_m: float, pitch_deg: float) -> float:
+    """The horizontal distance [m] at which a camera `height_m` above flat ground, pitched `pitch_deg` below the
+    horizon, has the ground on its optical axis: height / tan(pitch); exactly 0 for a downward camera. The following
+    band (`trade_gym.scoring.FollowBand`) is centred there, and a pitched camera's drone starts there
+    (`trade_gym.sim.world.World.drone_start`)."""
+    return height_m / math.tan(math.radians(pitch_deg)) if pitch_deg < NADIR_PITCH_DEG else 0.0
 
 
 def mount_rotation(pitch_deg: float) -> FloatArray:

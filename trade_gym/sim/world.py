@@ -19,9 +19,10 @@ import pybullet as p
 from trade.geometry import CameraIntrinsics, Pose
 from trade_gym.sim import city, desert, mountain
 from trade_gym.sim.bullet_lists import bullet_list
+from trade_gym.sim.camera import NADIR_PITCH_DEG, standoff_m
 from trade_gym.sim.culling import ViewCuller
 from trade_gym.sim.evasive import EvasiveMotion
-from trade_gym.sim.layout import Lake, Road, SceneLayout, parked
+from trade_gym.sim.layout import Lake, Road, SceneLayout, direction, parked
 from trade_gym.sim.mesh_files import remove_mesh_files
 from trade_gym.sim.meshes import (
     TEXTURE_PERIOD_M, Mesh, building_meshes, create_terrain_visual, grid_uvs, placed_meshes, polygon_mesh, rock_mesh,
@@ -247,9 +248,18 @@ class World:
             return ground
         return np.maximum(ground, self.roofs.heights(x_m, y_m))
 
-    def drone_start(self) -> tuple[FloatArray, float]:
-        """(3,) start position [m] and yaw [rad]: the target is in view of a downward camera."""
-        return self.layout.drone_start_m.copy(), self.layout.drone_yaw_rad
+    def drone_start(self, camera_pitch_deg: float = NADIR_PITCH_DEG) -> tuple[FloatArray, float]:
+        """(3,) start position [m] and yaw [rad], with the target in view: the scene's start for a downward camera;
+        for one pitched below the horizon, moved back against the yaw by the standoff of its height above the ground
+        (`camera.standoff_m`: one height at 45 deg), at the same height above the ground there, so the camera's
+        axis meets the ground where the downward camera's did (else the target starts at the image's lower edge
+        and leaves it within frames)."""
+        position, yaw = self.layout.drone_start_m.copy(), self.layout.drone_yaw_rad
+        if camera_pitch_deg < NADIR_PITCH_DEG:
+            height_m = float(position[2] - self.ground_height_m(float(position[0]), float(position[1])))
+            position[:2] -= standoff_m(height_m, camera_pitch_deg) * direction(yaw)
+            position[2] = float(self.ground_height_m(float(position[0]), float(position[1]))) + height_m
+        return position, yaw
 
 
 ROUTE_SAMPLE_M = 1.0  # spacing of the target route's points a parked decoy's distance is measured to
