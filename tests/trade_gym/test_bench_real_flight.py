@@ -4,9 +4,7 @@ time of day with the scene's own hour, every evaluation world), --list and --abl
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 from trade_gym.bench import cli, runner
@@ -19,6 +17,8 @@ from trade_gym.bench.summary import summarise
 from trade_gym.config import SCENE_NAMES, EnvConfig
 from trade_gym.metrics import METRIC_NAMES
 from trade_gym.sim.thermal_crossover import DAY_H, NIGHT_H, TIMES_OF_DAY, morning_crossover
+
+from tests.trade_gym.test_results_doc import load_renderer
 
 ROOT = Path(__file__).resolve().parents[2]
 ALL = ("scripted", "learned", "waypoint", "hover", "random")
@@ -113,15 +113,6 @@ def test_failure_classes_name_tracking_depth_collision_and_lag_and_an_error():
     assert failure_classes({}, "RuntimeError: boom") == ["run error: RuntimeError: boom"]
 
 
-def _renderer():
-    path = ROOT / "scripts" / "render_results_doc.py"
-    spec = importlib.util.spec_from_file_location("render_results_doc", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["render_results_doc"] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_a_tiny_real_flight_run_of_both_perceptions_writes_results_that_reload_and_render_a_results_page(
         tmp_path, monkeypatch):
     out = tmp_path / "real_flight"
@@ -139,7 +130,7 @@ def test_a_tiny_real_flight_run_of_both_perceptions_writes_results_that_reload_a
     flown = {r["run_id"]: r["env_kwargs"] for r in doc["runs"]}
     assert all(r.spec.env_kwargs() == flown[r.spec.run_id] for r in results)  # the hours flown come back
     assert (out / "real_flight_by_time_of_day.png").is_file() and (out / "real_flight_per_world.png").is_file()
-    doc_module = _renderer()
+    doc_module = load_renderer()
     monkeypatch.setattr(doc_module, "RESULTS_DIR", tmp_path)
     section = next(s for s in doc_module.SECTIONS if s.page == "real_flight")
     page = doc_module.render_section(section)

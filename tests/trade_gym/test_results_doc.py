@@ -24,7 +24,8 @@ IMAGE_LINK = re.compile(r"!\[[^]]*\]\(([^)]+)\)")
 PAGE_LINK = re.compile(r"(?<!!)\[[^]]*\]\((results/[^)#]+\.md)\)")
 
 
-def _renderer():
+def load_renderer():
+    """scripts/render_results_doc.py as a module (scripts/ is no package)."""
     path = ROOT / "scripts" / "render_results_doc.py"
     spec = importlib.util.spec_from_file_location("render_results_doc", path)
     module = importlib.util.module_from_spec(spec)
@@ -35,7 +36,7 @@ def _renderer():
 
 def _pages() -> list[Path]:
     """The summary and every committed per-suite page."""
-    doc = _renderer()
+    doc = load_renderer()
     return [SUMMARY] + [s.path for s in doc.SECTIONS if s.path.is_file()]
 
 
@@ -51,14 +52,14 @@ def _row(text: str, prefix: str) -> str:
 
 
 def test_every_results_page_is_the_render_of_the_committed_results():
-    doc = _renderer()
+    doc = load_renderer()
     pages = doc.render()
     assert SUMMARY in pages and {s.path for s in doc.SECTIONS if s.present()} <= set(pages)
     assert doc.stale_pages(pages) == [], "stale: run python scripts/render_results_doc.py"
 
 
 def test_check_exits_1_naming_a_stale_page_and_0_when_all_are_current(tmp_path, monkeypatch, capsys):
-    doc = _renderer()
+    doc = load_renderer()
     current, stale, missing = tmp_path / "current.md", tmp_path / "stale.md", tmp_path / "missing.md"
     current.write_text("same\n")
     stale.write_text("old\n")
@@ -71,7 +72,7 @@ def test_check_exits_1_naming_a_stale_page_and_0_when_all_are_current(tmp_path, 
 
 
 def test_summary_is_at_most_the_word_budget_with_a_table_and_commit_per_question():
-    doc = _renderer()
+    doc = load_renderer()
     text = SUMMARY.read_text()
     assert len(text.split()) <= doc.SUMMARY_MAX_WORDS  # as `wc -w` counts
     present = [h for h in doc.HEADLINES if (doc.RESULTS_DIR / h.folder / "results.json").is_file()]
@@ -83,7 +84,7 @@ def test_summary_is_at_most_the_word_budget_with_a_table_and_commit_per_question
 
 
 def test_every_page_the_summary_links_exists_and_every_per_suite_page_is_linked():
-    doc = _renderer()
+    doc = load_renderer()
     linked = set(PAGE_LINK.findall(SUMMARY.read_text()))
     for target in linked:
         assert (SUMMARY.parent / target).is_file(), target
@@ -132,7 +133,7 @@ def test_summary_depth_flights_above_threshold_are_counted_from_the_committed_ru
 
 
 def test_summary_leaves_out_a_question_whose_results_are_missing(tmp_path, monkeypatch):
-    doc = _renderer()
+    doc = load_renderer()
     shutil.copytree(doc.RESULTS_DIR / "latency", tmp_path / "latency", ignore=shutil.ignore_patterns("*.png"))
     monkeypatch.setattr(doc, "RESULTS_DIR", tmp_path)
     monkeypatch.setattr(doc, "SPEED_DIR", tmp_path)

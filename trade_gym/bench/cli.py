@@ -34,22 +34,26 @@ REFERENCE_SUITE = "quick"  # the suite the regression reference records
 MIN_STEPS, MIN_CAMERA_PX, MIN_JOBS = 1, 16, 1  # EnvConfig's camera_size floor is 16 px
 
 
+# --suite's help: each suite and its duration on 2 cores
+SUITE_HELP = ("quick (make demo, ~1-3 min), paper (the paper's "
+              "tables on its development worlds, ~1 h on 2 cores), unseen (the paper's protocol on the 20 "
+              "evaluation worlds per scene, ~1.5 h), tuning (the unseen grid on 20 development worlds, to tune "
+              "on), latency (full TRADE, scripted and learned followers, every scene, fixed perception latency "
+              "0-400 ms, 30 runs, ~15 min), breadth (every decoy tier x target motion x appearance, scripted and "
+              "learned, TRADE and DCF, 5 evaluation worlds per scene, 1080 runs, ~2.6 h with --jobs 2), breadth-tuning "
+              "(the breadth grid on 5 training worlds per scene, to find failures and tune on), unseen-depth "
+              "(the depth failure finder: ground depth on 40 training and the 20 evaluation worlds per scene, "
+              "720 runs; a strip of frames per failed world), real-flight (the paper's onboard setup: thermal camera at "
+              "45 deg, light stack, waypoint follower, vio pose, TRADE and DCF at night, the morning crossover and "
+              "by day on the 20 evaluation worlds per scene, 360 runs, ~1.5 h with --jobs 2), full "
+              "(paper tables at full length plus all followers, hours)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog=PROG, description="Score follower policies and perception variants on TradeFollow-v0. "
                 "With --suite, --scenes/--policies/--perceptions/--pose-sources/--ablation/--tables filter the "
                 "suite and --seeds/--steps/--camera-size override it; without, they define one grid.")
-    p.add_argument("--suite", choices=tuple(SUITES), help="quick (make demo, ~1-3 min), paper (the paper's "
-                   "tables on its development worlds, ~1 h on 2 cores), unseen (the paper's protocol on the 20 "
-                   "evaluation worlds per scene, ~1.5 h), tuning (the unseen grid on 20 development worlds, to tune "
-                   "on), latency (full TRADE, scripted and learned followers, every scene, fixed perception latency "
-                   "0-400 ms, 30 runs, ~15 min), breadth (every decoy tier x target motion x appearance, scripted and "
-                   "learned, TRADE and DCF, 5 evaluation worlds per scene, 1080 runs, ~2.6 h with --jobs 2), breadth-tuning "
-                   "(the breadth grid on 5 training worlds per scene, to find failures and tune on), unseen-depth "
-                   "(the depth failure finder: ground depth on 40 training and the 20 evaluation worlds per scene, "
-                   "720 runs; a strip of frames per failed world), real-flight (the paper's onboard setup: thermal camera at "
-                   "45 deg, light stack, waypoint follower, vio pose, TRADE and DCF at night, the morning crossover and "
-                   "by day on the 20 evaluation worlds per scene, 360 runs, ~1.5 h with --jobs 2), full "
-                   "(paper tables at full length plus all followers, hours)")
+    p.add_argument("--suite", choices=tuple(SUITES), help=SUITE_HELP)
     p.add_argument("--tables", nargs="+", metavar="GROUP", help="groups of the suite to run (see --list); with "
                    "--report, the groups of the earlier run to render (and --scenes its scenes)")
     p.add_argument("--scenes", nargs="+", choices=SCENE_NAMES)
