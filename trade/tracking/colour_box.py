@@ -2,6 +2,7 @@
 
 Owns the object and surround colour histograms, the likelihood map around the tracked centre and the
 tight box of the target's blob in it, with the plausibility tests that decide whether that box is used.
+On a grey image (a thermal camera's) the histograms are over grey levels (`trade.tracking.pixel_bins`).
 """
 
 from __future__ import annotations
@@ -13,26 +14,19 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from trade.tracking.pixel_bins import ColourBins, GreyBins, PixelBins, is_grey
 from trade.types import BBox
 
 FloatArray = npt.NDArray[np.float64]
 ImageRGB = npt.NDArray[np.uint8]
 # OpenCV's stubs type every result as "an integer or float array"; the casts below name the dtype each call keeps
-# (uint8 masks through threshold and morphology, float32 histograms through calcHist and sepFilter2D)
+# (uint8 masks through threshold and morphology)
 Mask = npt.NDArray[np.uint8]
-Histogram = npt.NDArray[np.float32]
 
 # Likelihoods in [0, 1] are back-projected as uint8 round(255 L) (Otsu's threshold works on these).
 _LEVELS = 255
-# Histogram channels (R, G, B) and their value ranges for cv2.calcHist.
-_CHANNELS = [0, 1, 2]
-_RANGES = [0, 256, 0, 256, 0, 256]
-_BITS_PER_CHANNEL = 8
 # A pixel centre on the blob lies within 1/2 px of the query along each axis: d^2 <= 1/2.
 _ON_PIXEL_D2 = 0.5
-# The 3-tap binomial kernel [1 2 1] / 4 that smooths the histograms along each colour axis.
-_BLUR_KERNEL = np.array([0.25, 0.5, 0.25])
-_IDENTITY_KERNEL = np.ones(1)
 
 
 @dataclass(frozen=True)
@@ -64,13 +58,27 @@ class ColourBoxConfig:
     learning_rate: float = 0.05  # eta in p <- (1 - eta) p + eta p_new, on accepted refinements only
     box_rim_px: int = 1  # object colours come from the init box eroded by this (its rim mixes colours)
     blob_rim_px: int = 0  # ... and from the blob eroded by this (thresholded: its rim is mostly object)
+    # On a grey image (`pixel_bins.is_grey`, a thermal camera's) the model is a histogram of grey levels. A vehicle's
+    # shell at one temperature is one grey level give or take the sensor's noise, while a 16-level bin (the colour
+    # cubes' side) also holds the warm rocks around it, and the blob grew over them (night desert, see
+    # docs/perception.md "Thermal images").
+    grey_bins: int = 128
+    grey_histogram_blur_passes: int = 2  # binomial smoothing passes along the grey axis
+    # On a grey image a blob must fill at least this share of the tracker's box (blob pixels / its area): a driving
+    # vehicle's engine cover and exhaust are far hotter than its body, and their blob alone (a third of the vehicle)
+    # is the likeliest one; taken, it shrank the box onto them (night mountain). A whole vehicle fills 0.8-1 of its
+    # box, a turning one less.
+    grey_min_blob_fill_ratio: float = 0.45
 
     def __post_init__(self) -> None:
         counts = ("bins_per_channel", "histogram_blur_passes", "min_window_px", "closing_radius_px",
-                  "opening_radius_px", "max_border_sides", "box_rim_px", "blob_rim_px")
+                  "opening_radius_px", "max_border_sides", "box_rim_px", "blob_rim_px", "grey_bins",
+                  "grey_histogram_blur_passes")
         checks = {name: int(getattr(self, name)) == getattr(self, name) and getattr(self, name) >= 0 for name in counts}
         checks |= {
             "bins_per_channel": checks["bins_per_channel"] and 2 <= self.bins_per_channel <= 64,
+            "grey_bins": checks["grey_bins"] and 2 <= self.grey_bins <= 256,
+            "grey_min_blob_fill_ratio": 0.0 <= self.grey_min_blob_fill_ratio <= self.max_blob_fill_ratio,
             "surround_factor": self.surround_factor > 1.0,
             "prior_likelihood": 0.0 <= self.prior_likelihood <= 1.0,
             "prior_density": self.prior_density > 0,
@@ -126,19 +134,6 @@ def _pixel_slices(image_hw: tuple[int, int], center_px: FloatArray, size_wh_px: 
     return slice(lo[1], hi[1]), slice(lo[0], hi[0])
 
 
-def _blur_histogram(hist: npt.NDArray[np.float32], passes: int) -> npt.NDArray[np.float32]:
-    """(n, n, n) histogram convolved `passes` times with [1 2 1] / 4 along each axis, zero outside."""
-    n = hist.shape[0]
-    for _ in range(passes):
-        # axes 0 and 1 as image rows and columns with axis 2 as channels, then axis 2 as columns; ddepth -1 keeps
-        # float32 (the casts: OpenCV's stubs say only "an integer or float array")
-        hist = cast(Histogram, cv2.sepFilter2D(hist, -1, _BLUR_KERNEL, _BLUR_KERNEL, borderType=cv2.BORDER_CONSTANT))
-        hist = cast(Histogram, cv2.sepFilter2D(
-            hist.reshape(n * n, n), -1, _BLUR_KERNEL, _IDENTITY_KERNEL, borderType=cv2.BORDER_CONSTANT
-        ).reshape(n, n, n))
-    return hist
-
-
 def _square_kernel(radius_px: int) -> npt.NDArray[np.uint8]:
     """The (2 r + 1)-px square structuring element of a morphological operation of radius r."""
     return np.ones((2 * radius_px + 1, 2 * radius_px + 1), np.uint8)
@@ -158,26 +153,30 @@ class ColourBoxRefiner:
 
     def __init__(self, config: ColourBoxConfig | None = None) -> None:
         self.config = config if config is not None else ColourBoxConfig()
-        n = self.config.bins_per_channel
-        self._hist_size = [n, n, n]
+        self._colour_bins = ColourBins(self.config.bins_per_channel, self.config.histogram_blur_passes)
+        self._grey_bins = GreyBins(self.config.grey_bins, self.config.grey_histogram_blur_passes)
+        self._bins: PixelBins = self._colour_bins  # chosen by the image `init` learns from
         self._p_obj: npt.NDArray[np.float32] | None = None
         self._p_surr: npt.NDArray[np.float32] | None = None
-        self._lut = np.full((n, n, n), self.config.prior_likelihood, dtype=np.float32)
+        self._lut = np.full(self._bins.shape, self.config.prior_likelihood, dtype=np.float32)
 
     @property
     def likelihood_lut(self) -> npt.NDArray[np.float32]:
-        """(n, n, n) P(target | colour) per (r, g, b) bin, n = bins_per_channel, bin = value * n // 256."""
+        """P(target | colour) per bin: (n, n, n) per (r, g, b) bin, n = bins_per_channel, bin = value * n // 256; after
+        `init` on a grey image, (grey_bins,) per grey-level bin."""
         return self._lut
 
-    def _density(self, pixels: ImageRGB, mask: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
-        """Normalised, smoothed (n, n, n) colour histogram of the (h, w, 3) pixels under the (h, w) mask."""
-        hist = cast(Histogram, cv2.calcHist([pixels], _CHANNELS, mask, self._hist_size, _RANGES))  # float32 counts
-        hist = _blur_histogram(hist, self.config.histogram_blur_passes)
-        total = float(hist.sum())
-        return hist / total if total > 0 else hist
+    @property
+    def grey(self) -> bool:
+        """Whether the model is over grey levels (`init` was given a grey image)."""
+        return self._bins.grey
+
+    def _bins_for(self, image_rgb: ImageRGB) -> PixelBins:
+        return self._grey_bins if is_grey(image_rgb) else self._colour_bins
 
     def _object_and_surround(
-        self, image_rgb: ImageRGB, box: BBox, blob: npt.NDArray[np.bool_] | None, blob_origin: tuple[int, int]
+        self, image_rgb: ImageRGB, box: BBox, blob: npt.NDArray[np.bool_] | None, blob_origin: tuple[int, int],
+        bins: PixelBins,
     ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
         """Colour densities of the object (the box, or `blob` with its top-left pixel at `blob_origin`,
         without its rim) and of the surround ring (surround_factor x box, minus the box)."""
@@ -199,10 +198,10 @@ class ColourBoxRefiner:
             obj_cols = slice(blob_origin[0], blob_origin[0] + blob.shape[1])
         # edge pixels mix object and surround colours
         core = _eroded(obj_mask, self.config.box_rim_px if blob is None else self.config.blob_rim_px)
-        return self._density(image_rgb[obj_rows, obj_cols], core), self._density(image_rgb[rows, cols], ring)
+        return bins.density(image_rgb[obj_rows, obj_cols], core), bins.density(image_rgb[rows, cols], ring)
 
     def _likelihood_lut(self, p_obj: npt.NDArray[np.float32], p_surr: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
-        """(n, n, n) L(b) = (p_obj + lambda prior) / (p_obj + w p_surr + lambda)."""
+        """L(b) = (p_obj + lambda prior) / (p_obj + w p_surr + lambda) per bin b."""
         cfg = self.config
         lut = (p_obj + cfg.prior_density * cfg.prior_likelihood) / (
             p_obj + cfg.surround_weight * p_surr + cfg.prior_density
@@ -212,7 +211,7 @@ class ColourBoxRefiner:
     def _set_model(self, p_obj: npt.NDArray[np.float32], p_surr: npt.NDArray[np.float32]) -> None:
         self._p_obj, self._p_surr = p_obj, p_surr
         self._lut = self._likelihood_lut(p_obj, p_surr)
-        # quantised look-up table indexed by the flat colour bin (r n + g) n + b
+        # quantised look-up table indexed by the flat bin (`PixelBins.flat_index`)
         self._lut_u8 = np.round(self._lut * _LEVELS).astype(np.uint8).ravel()
 
     def separation(self, image_rgb: ImageRGB, box: BBox) -> float:
@@ -224,11 +223,9 @@ class ColourBoxRefiner:
         size = np.array([box.w_px, box.h_px])
         rows, cols = _pixel_slices(image_rgb.shape[:2], box.center, self.config.surround_factor * size)
         in_rows, in_cols = _pixel_slices(image_rgb.shape[:2], box.center, size)
-        p_obj, p_surr = self._object_and_surround(image_rgb, box, None, (0, 0))
-        lut = self._likelihood_lut(p_obj, p_surr)
-        n = self.config.bins_per_channel
-        q = (image_rgb[rows, cols].astype(np.uint16) * n) >> _BITS_PER_CHANNEL
-        like = lut[q[..., 0], q[..., 1], q[..., 2]]
+        bins = self._bins_for(image_rgb)
+        p_obj, p_surr = self._object_and_surround(image_rgb, box, None, (0, 0), bins)
+        like = self._likelihood_lut(p_obj, p_surr).ravel()[bins.flat_index(image_rgb[rows, cols])]
         inside = np.zeros(like.shape, dtype=bool)
         inside[in_rows.start - rows.start : in_rows.stop - rows.start, in_cols.start - cols.start : in_cols.stop - cols.start] = True
         ring = ~inside
@@ -238,9 +235,10 @@ class ColourBoxRefiner:
 
     def init(self, image_rgb: ImageRGB, box: BBox) -> None:
         """Learn the object colours inside `box` [px] (without its rim) and the surround colours in
-        the ring around it; image_rgb: (H, W, 3) uint8."""
+        the ring around it; image_rgb: (H, W, 3) uint8. On a grey image the colours are grey levels (`grey`)."""
         _check_image(image_rgb)
-        self._set_model(*self._object_and_surround(image_rgb, box, None, (0, 0)))
+        self._bins = self._bins_for(image_rgb)
+        self._set_model(*self._object_and_surround(image_rgb, box, None, (0, 0), self._bins))
 
     def update(self, image_rgb: ImageRGB, refinement: BoxRefinement) -> bool:
         """Blend in the colours of an accepted refinement (object = its blob); False (no-op) if rejected."""
@@ -248,7 +246,8 @@ class ColourBoxRefiner:
             return False  # learn only from accepted blobs
         _check_image(image_rgb)
         eta = self.config.learning_rate
-        obj, surr = self._object_and_surround(image_rgb, refinement.box, refinement.mask, refinement.window_origin_px)
+        obj, surr = self._object_and_surround(image_rgb, refinement.box, refinement.mask, refinement.window_origin_px,
+                                              self._bins)
         # p <- (1 - eta) p + eta p_new, per region
         self._set_model((1 - eta) * self._p_obj + eta * obj, (1 - eta) * self._p_surr + eta * surr)
         return True
@@ -257,9 +256,7 @@ class ColourBoxRefiner:
         """(h, w) round(255 P(target | colour)) of an (h, w, 3) uint8 RGB image or crop."""
         if self._p_obj is None:
             raise RuntimeError("ColourBoxRefiner.init must be called first")
-        n = self.config.bins_per_channel
-        q = (image_rgb.astype(np.uint16) * n) >> _BITS_PER_CHANNEL  # bin = value * n // 256
-        return np.take(self._lut_u8, (q[..., 0] * n + q[..., 1]) * n + q[..., 2])  # = lut[flat bin], faster
+        return np.take(self._lut_u8, self._bins.flat_index(image_rgb))  # = lut[flat bin], faster
 
     def likelihood_map(self, image_rgb: ImageRGB) -> npt.NDArray[np.float32]:
         """(h, w) P(target | colour) in [0, 1] (steps of 1/255) of an (h, w, 3) uint8 RGB image or crop."""
@@ -356,6 +353,8 @@ class ColourBoxRefiner:
             rejection = f"area ratio {area_ratio:.2f} outside [{cfg.min_area_ratio}, {cfg.max_area_ratio}]"
         elif fill > cfg.max_blob_fill_ratio:
             rejection = f"blob fills {fill:.2f} > {cfg.max_blob_fill_ratio} of the tracker's box"
+        elif self._bins.grey and size_reference is not None and fill < cfg.grey_min_blob_fill_ratio:
+            rejection = f"grey blob fills {fill:.2f} < {cfg.grey_min_blob_fill_ratio} of the tracker's box"
         elif touches > cfg.max_border_sides:
             rejection = f"blob touches {touches} window sides"
         elif contrast <= cfg.min_contrast:
