@@ -23,6 +23,14 @@ from trade.types import BBox
 
 BoolArray = npt.NDArray[np.bool_]
 
+# The shipped depth model's training views had mount pitches U(60, 90) deg from a level drone (its model card,
+# assets/models/depth_small.md; ViewConfig of scripts/make_depth_dataset.py): the top of a 110 deg image stayed >= 5
+# deg below the horizon. A camera pitched lower sees the horizon and sky, and the model's map is no depth map there:
+# at 45 deg (desert training world 10000, 256 px) its inverse depth fell from the sky at the top of the image to the
+# foreground at its bottom (correlation -0.99 with the true inverse depth around the target), and once aligned its
+# ground tiles tilted ~51 deg, so the segmentation found no level seed and no track was ever labelled ground.
+SHIPPED_MODEL_MIN_PITCH_DEG = 60.0
+
 
 class DepthPredictor(Protocol):
     """Relative inverse depth of an RGB image: (H, W, 3) uint8 -> (H, W) float32."""
@@ -35,6 +43,9 @@ class GroundFilterConfig:
     """Cadence of the depth model and the configs of alignment and segmentation."""
 
     every_n_frames: int = 3  # run the model on every n-th frame (10 Hz at a 30 Hz camera)
+    # The mask needs a camera pitched at least this far below the horizon [deg] (the model's training views,
+    # `trade.camera_pitch.ground_mask_usable`); below it the pipeline runs without the mask.
+    min_camera_pitch_deg: float = SHIPPED_MODEL_MIN_PITCH_DEG
     min_promoted_features: int = 8  # converged ROI depths needed to align the model's map
     object_height_smoothing: float = 0.3  # weight of a new height estimate in the running mean
     depth_agreement_sigmas: float = 3.0  # a converged track is ground only if its depth agrees with the map
@@ -47,6 +58,9 @@ class GroundFilterConfig:
         if int(self.min_promoted_features) != self.min_promoted_features or self.min_promoted_features < 2:
             raise ValueError("GroundFilterConfig.min_promoted_features must be an integer >= 2, "
                              f"got {self.min_promoted_features!r}")
+        if not (np.isfinite(self.min_camera_pitch_deg) and 0.0 <= self.min_camera_pitch_deg <= 90.0):
+            raise ValueError("GroundFilterConfig.min_camera_pitch_deg must be in [0, 90], "
+                             f"got {self.min_camera_pitch_deg!r}")
         if not (np.isfinite(self.depth_agreement_sigmas) and self.depth_agreement_sigmas > 0.0):
             raise ValueError("GroundFilterConfig.depth_agreement_sigmas must be finite and > 0, "
                              f"got {self.depth_agreement_sigmas!r}")

@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from trade.camera_pitch import NADIR_PITCH_DEG, check_pitch, ground_mask_usable, roi_config_for_pitch
 from trade.depth_only import DepthOnlyConfig, DepthOnlyLocaliser
 from trade.frame_guard import (
     MISSING, OUT_OF_VIEW, FrameGuardConfig, TrackedFrame, predicted_out_of_view, unusable_frame,
@@ -82,8 +83,13 @@ class PipelineConfig:
     min_masked_plane_points: int = 6
     trajectory_preview_s: float = 1.0  # horizon of the predicted trajectory kept for drawing
     trajectory_preview_points: int = 10
+    # The camera's mount pitch below the body's forward axis [deg] (90: nadir, the paper's offline setting; 45: its
+    # real flight). The settings it changes follow from it by the rules of `trade.camera_pitch`: the ROI promotion
+    # threshold is a height error, and below ground_filter.min_camera_pitch_deg the ground mask is not used.
+    camera_pitch_deg: float = NADIR_PITCH_DEG
 
     def __post_init__(self) -> None:
+        check_pitch("PipelineConfig.camera_pitch_deg", self.camera_pitch_deg)
         if self.single_image_depth and self.ground_mask:
             raise ValueError("single_image_depth (depth-only, no plane) and ground_mask (selects plane points) "
                              f"exclude each other; got single_image_depth={self.single_image_depth!r}, "
@@ -166,12 +172,15 @@ class TradePipeline:
         self._rng = rng
         self.tracking = GuidedTracker(config.tracker)
         self.trajectory = TrajectoryModel(config.trajectory)
-        self.roi = RoiFeatureTracker(config.roi, intrinsics)
-        self._min_plane_points = config.min_masked_plane_points if config.ground_mask else config.min_plane_points
-        fusion = replace(config.fusion, min_points=self._min_plane_points) if config.ground_mask else config.fusion
+        self.roi = RoiFeatureTracker(roi_config_for_pitch(config.roi, config.camera_pitch_deg), intrinsics)
+        # the mask only where the depth model knows the view (`ground_mask_usable`); else the plane takes all tracks
+        self.masked = config.ground_mask and ground_mask_usable(config.camera_pitch_deg,
+                                                                config.ground_filter.min_camera_pitch_deg)
+        self._min_plane_points = config.min_masked_plane_points if self.masked else config.min_plane_points
+        fusion = replace(config.fusion, min_points=self._min_plane_points) if self.masked else config.fusion
         self.fusion = TemporalPlaneFusion(fusion, rng)
         self.ground = (GroundFilter(config.ground_filter, intrinsics, depth_model, rng)
-                       if config.ground_mask and depth_model is not None else None)
+                       if self.masked and depth_model is not None else None)
         self.depth_only = (DepthOnlyLocaliser(config.depth_only, intrinsics, depth_model, rng,
                                               config.depth_only_ransac)
                            if config.single_image_depth and depth_model is not None else None)

@@ -47,6 +47,9 @@ class RoiConfig:
     """ROI geometry, Harris/KLT parameters and the depth filter's noise and thresholds."""
 
     roi_margin_factor: float = 2.0  # margin on each side = factor x the box's shorter side
+    # Tracks are seeded in the ROI and kept until they leave it with its margins scaled by this (1: the ROI itself,
+    # the paper's); the pipeline sets it for a pitched camera (`trade.camera_pitch.roi_config_for_pitch`).
+    keep_margin_scale: float = 1.0
     max_features_per_tile: int = 25
     harris_quality_level: float = 0.01  # relative to the strongest corner of the tile
     harris_k: float = 0.04
@@ -71,6 +74,8 @@ class RoiConfig:
             value, low = getattr(self, name), 0 if name == "klt_pyramid_levels" else 1
             if int(value) != value or value < low:
                 raise ValueError(f"RoiConfig.{name} must be an integer >= {low}, got {value!r}")
+        if not (math.isfinite(self.keep_margin_scale) and self.keep_margin_scale >= 1.0):
+            raise ValueError(f"RoiConfig.keep_margin_scale must be finite and >= 1, got {self.keep_margin_scale!r}")
         positive: tuple[str, ...] = ("roi_margin_factor", "harris_quality_level", "klt_epsilon_px", "fb_threshold_px")
         positive += ("pixel_sigma_px", "max_ray_gap_px", "promote_sigma_m", "anchor_max_shift_px")
         for name in positive:
@@ -94,7 +99,7 @@ class RoiFeatures:
     sigma_m: FloatArray  # (N,) 1-sigma of depth_m [m]; inf where never triangulated
     promoted: BoolArray  # (N,) depth converged (sticky once set)
     track_ids: IntArray  # (N,) unique per reset
-    tile: IntArray  # (N,) row-major tile index 0..8 (never CENTRE_TILE)
+    tile: IntArray  # (N,) row-major tile index 0..8 (never CENTRE_TILE); -1 kept beyond the ROI (keep_margin_scale)
     roi: BBox  # ROI rectangle [px]; may extend past the image
 
 
@@ -229,12 +234,16 @@ class RoiFeatureTracker:
         if gray.dtype != np.uint8 or gray.shape != (self.intrinsics.height_px, self.intrinsics.width_px):
             size = (self.intrinsics.height_px, self.intrinsics.width_px)
             raise ValueError(f"step needs a uint8 {size} image, got {gray.dtype} {gray.shape}")
-        xs, ys = roi_tile_edges(box, self.config.roi_margin_factor)
+        cfg = self.config
+        xs, ys = roi_tile_edges(box, cfg.roi_margin_factor)
         alive = (self._track(self._prev, gray) if self._prev is not None and len(self._ids)
                  else np.ones(len(self._ids), bool))
-        tiles = tile_index(self._px.astype(np.float64), xs, ys)
-        keep = alive & (tiles >= 0) & (tiles != CENTRE_TILE)
-        keep[keep] = _oldest_per_tile(tiles[keep], self._ids[keep], self.config.max_features_per_tile)
+        pixels = self._px.astype(np.float64)
+        tiles = tile_index(pixels, xs, ys)
+        kept_zone = tile_index(pixels, *roi_tile_edges(box, cfg.roi_margin_factor * cfg.keep_margin_scale)) >= 0
+        keep = alive & kept_zone & (tiles != CENTRE_TILE)
+        in_roi = keep & (tiles >= 0)  # the per-tile cap counts the ROI's tracks; those kept beyond it are extra
+        keep[in_roi] = _oldest_per_tile(tiles[in_roi], self._ids[in_roi], cfg.max_features_per_tile)
         self._select(keep)
         self._fuse(T_world_cam)
         self._top_up(gray, xs, ys, T_world_cam)

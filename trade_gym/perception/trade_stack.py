@@ -39,7 +39,7 @@ STACK_SWITCHES = ("temporal_fusion", "ground_mask", "single_image_depth", "depth
 
 
 def pipeline_config(config: EnvConfig) -> PipelineConfig:
-    """The stack's configuration for an env configuration (its ablation switches)."""
+    """The stack's configuration for an env configuration (its ablation switches and its camera's mount pitch)."""
     return PipelineConfig(
         tracker=GuidedTrackerConfig(trajectory_guidance=config.trajectory_guidance and config.perception == "trade",
                                     snap_init_box=config.snap_init_box),
@@ -47,6 +47,7 @@ def pipeline_config(config: EnvConfig) -> PipelineConfig:
         ground_mask=config.ground_mask,
         single_image_depth=config.single_image_depth,
         depth_only_ransac=config.depth_only_ransac,
+        camera_pitch_deg=config.camera_pitch_deg,  # the settings that follow from the viewing geometry
     )
 
 
