@@ -240,7 +240,9 @@ class RoiFeatureTracker:
                  else np.ones(len(self._ids), bool))
         pixels = self._px.astype(np.float64)
         tiles = tile_index(pixels, xs, ys)
-        kept_zone = tile_index(pixels, *roi_tile_edges(box, cfg.roi_margin_factor * cfg.keep_margin_scale)) >= 0
+        wide = cfg.keep_margin_scale != 1.0  # else the kept zone is the ROI, whose tiles are at hand
+        kept_zone = (tile_index(pixels, *roi_tile_edges(box, cfg.roi_margin_factor * cfg.keep_margin_scale))
+                     if wide else tiles) >= 0
         keep = alive & kept_zone & (tiles != CENTRE_TILE)
         in_roi = keep & (tiles >= 0)  # the per-tile cap counts the ROI's tracks; those kept beyond it are extra
         keep[in_roi] = _oldest_per_tile(tiles[in_roi], self._ids[in_roi], cfg.max_features_per_tile)

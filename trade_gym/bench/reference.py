@@ -24,7 +24,6 @@ Regenerate (after an intended change, from a clean git tree, whose commit the re
 
 from __future__ import annotations
 
-import importlib.metadata
 import json
 import math
 import subprocess
@@ -35,7 +34,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from trade_gym.bench.results import simd_meta, to_json_safe
+from trade_gym.bench.results import package_versions, simd_meta, to_json_safe
 from trade_gym.bench.runner import RunResult
 from trade_gym.provenance import git_head, tracked_changes
 
@@ -138,13 +137,7 @@ def stack_pins(path: Path | None = None) -> dict[str, str]:
 
 def stack_versions(names: Sequence[str] | None = None) -> dict[str, str]:
     """The installed versions of the pinned packages (or of `names`); 'not installed' for a missing one."""
-    versions = {}
-    for name in stack_pins() if names is None else names:
-        try:
-            versions[name] = importlib.metadata.version(name)
-        except importlib.metadata.PackageNotFoundError:
-            versions[name] = "not installed"
-    return versions
+    return package_versions(tuple(stack_pins()) if names is None else names)
 
 
 def stack_differences(recorded: dict[str, str], current: dict[str, str]) -> list[str]:

@@ -37,9 +37,10 @@ RENDERER_NAMES = {"tiny": RENDERER, "egl": "EGL"}  # by EnvConfig.renderer ("egl
 SERIES_FILE = "series.npz"  # every run's per-frame series, keyed "<run_id>/<field>" (see RunSeries)
 
 
-def package_versions() -> dict[str, str]:
+def package_versions(names: Sequence[str] = PACKAGES) -> dict[str, str]:
+    """The installed version of each distribution in `names`; 'not installed' for a missing one."""
     versions = {}
-    for name in PACKAGES:
+    for name in names:
         try:
             versions[name] = importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:

@@ -13,13 +13,13 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
+from trade.camera_pitch import NADIR_PITCH_DEG  # a camera looking straight down (`CameraConfig.pitch_deg`)
 from trade.geometry import CameraIntrinsics, Pose
 from trade_gym.sim.mesh_files import draw_meshes_from_files
 
 FloatArray = npt.NDArray[np.float64]
 
 RENDERERS = ("tiny", "egl")
-NADIR_PITCH_DEG = 90.0  # a camera looking straight down (`CameraConfig.pitch_deg`, `EnvConfig.camera_pitch_deg`)
 MODALITIES = ("rgb", "thermal")  # what the camera images: visible light, or long-wave infrared (`thermal_camera`)
 # Where each renderer samples pixel (u, v) (OpenCV, row 0 on top): NDC x = 2 (u + du) / W - 1,
 # NDC y = 1 - 2 (v + dv) / H. Measured by rendering markers at known points (tests check < 0.5 px):
