@@ -53,6 +53,16 @@ def test_real_flight_suite_is_both_perceptions_at_three_times_on_every_evaluatio
     assert SUITE_JOBS["real-flight"] == 2 and "real-flight" in cli.EVALUATION_SUITES
 
 
+def test_real_flight_tuning_suite_is_the_real_flight_grid_on_ten_training_worlds_per_scene():
+    tuning, evaluation = expand_suite("real-flight-tuning", Selection(), ALL), expand_suite("real-flight", Selection(), ALL)
+    assert len(tuning) == len(evaluation) // 2 and all(r.world_seed in TRAINING for r in tuning)
+    assert len({r.world_seed for r in tuning}) == 10
+    cli.check_worlds("real-flight-tuning", tuning)
+    assert {r.run_id.rsplit("/", 1)[0] for r in tuning} == {r.run_id.rsplit("/", 1)[0] for r in evaluation}
+    assert {tuple(sorted(r.env_kwargs().items())) for r in tuning} == \
+        {tuple(sorted(r.env_kwargs().items())) for r in evaluation}  # the same envs; only the worlds differ
+
+
 def test_cli_lists_the_suites_runs_with_each_runs_hour(capsys):
     assert cli.main(["--suite", "real-flight", "--list"]) == 0
     lines = capsys.readouterr().out.splitlines()

@@ -45,7 +45,8 @@ SUITE_HELP = ("quick (make demo, ~1-3 min), paper (the paper's "
               "(the depth failure finder: ground depth on 40 training and the 20 evaluation worlds per scene, "
               "720 runs; a strip of frames per failed world), real-flight (the paper's onboard setup: thermal camera at "
               "45 deg, light stack, waypoint follower, vio pose, TRADE and DCF at night, the morning crossover and "
-              "by day on the 20 evaluation worlds per scene, 360 runs, ~1.5 h with --jobs 2), full "
+              "by day on the 20 evaluation worlds per scene, 360 runs, ~1.5 h with --jobs 2), real-flight-tuning (the "
+              "real-flight grid on 10 training worlds per scene, to tune on), full "
               "(paper tables at full length plus all followers, hours)")
 
 
