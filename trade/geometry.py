@@ -159,6 +159,16 @@ class RotationWarp:
         return np.array([x / w, y / w]) if w > 0 else np.full(2, np.nan)
 
 
+    def apply_box(self, bbox: FloatArray) -> FloatArray:
+        """(4,) box (x, y, w, h) [px] in the earlier image -> in the later: its centre warped, its size kept; the box
+        unchanged when it is not finite or its centre's ray turns behind the later camera."""
+        x, y, w, h = (float(v) for v in bbox)
+        centre = self.apply(np.array([x + w / 2.0, y + h / 2.0]))
+        if not np.all(np.isfinite(centre)) or not (math.isfinite(w) and math.isfinite(h)):
+            return np.asarray(bbox, dtype=np.float64)
+        return np.array([centre[0] - w / 2.0, centre[1] - h / 2.0, w, h])
+
+
 def project_world(K: CameraIntrinsics, T_world_cam: Pose, points_world: FloatArray) -> FloatArray:
     """World points (N, 3) [m] -> pixels (N, 2); NaN behind the camera."""
     return K.project(T_world_cam.inverse().apply(points_world))

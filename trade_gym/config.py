@@ -50,9 +50,10 @@ LIGHT_TRACKER_RATE_HZ = 7.5
 # explicitly must agree with a preset that fixes it.
 STACK_PRESETS: dict[str, dict[str, Any]] = {
     "full": {"temporal_fusion": True, "ground_mask": True, "single_image_depth": False,
-             "perception_latency": "none", "perception_latency_ms": None},
+             "perception_latency": "none", "perception_latency_ms": None, "latency_compensation": False},
     "light": {"temporal_fusion": True, "ground_mask": False, "single_image_depth": False,
-              "perception_latency": "fixed", "perception_latency_ms": MS_PER_S / LIGHT_TRACKER_RATE_HZ},
+              "perception_latency": "fixed", "perception_latency_ms": MS_PER_S / LIGHT_TRACKER_RATE_HZ,
+              "latency_compensation": True},
 }
 # Keywords a light preset fixes (the full stack is the default of each: there they stay free for ablations)
 LIGHT_FIXED = ("ground_mask", "single_image_depth")
@@ -142,6 +143,13 @@ class EnvConfig:
     # The stack's latency by default: "none" for the full stack, "fixed" at one tracker period for the light one.
     perception_latency: str = STACK_DEFAULT
     perception_latency_ms: float | None = STACK_DEFAULT
+    # Whether a late estimate's box moves with the camera: while the observation holds the estimate of an earlier
+    # frame, its box is carried to the current image by the camera's rotation since that frame (the infinite
+    # homography of the poses perception received then and now, `trade.geometry.RotationWarp`), as an onboard stack
+    # does with its attitude between a tracker result and the frame it is used on. On by default in the light stack
+    # (a fixed camera at 45 deg swings the target through the image as the drone tilts: one tracker period late, its
+    # box missed the target on most frames), off in the full one (the latency sweep measures raw latency).
+    latency_compensation: bool = STACK_DEFAULT
     # What the action sets (`trade_gym.action`): "velocity" (velocity and yaw-rate setpoints, heading frame) or
     # "waypoint" (a position and heading offset from the drone, held by the quadrotor's position controller as a PX4
     # offboard position setpoint; scaled by `waypoint_scale`, unused in velocity mode).

@@ -22,7 +22,7 @@ from trade_gym.annotate import annotate_frame, display_image
 from trade_gym.config import CAMERA_RATE_HZ, PHYSICS_RATE_HZ, EnvConfig
 from trade_gym.faults import SensorFilter
 from trade_gym.ground_truth import GroundTruth, VehicleBoxes, compute_ground_truth
-from trade_gym.latency import EstimateDelay
+from trade_gym.latency import HeldEstimates
 from trade_gym.observation import build_observation, observation_space
 from trade_gym.perception.base import PerceptionOutput, SensorFrame
 from trade_gym.perception.factory import make_perception
@@ -91,7 +91,8 @@ class TradeFollowEnv(gym.Env):
     estimate that arrives after a newer one is dropped. Scoring follows what the policy sees, as VOT's
     real-time experiment does: `info`'s `est_bbox`, `iou`, `on_decoy`, `target_depth_est`, `ground_depth_est`
     and `est_valid` are the held estimate's, compared with the ground truth of the current frame (but
-    `ground_depth_est` along frame k's true box ray, scored at frame k); `info["estimate_age_s"]` is its age.
+    `ground_depth_est` along frame k's true box ray, scored at frame k); `info["estimate_age_s"]` is its age. With
+    `latency_compensation` (the light stack's default) a held box moves with the camera's rotation since its frame.
 
     ## Info
     Ground truth and the estimate, per step: `t_s`; `gt_bbox` and `est_bbox` (x, y, w, h) [px] (`gt_bbox`
@@ -159,7 +160,7 @@ class TradeFollowEnv(gym.Env):
     - v0, issue 44: `reset(options={...})` sets the `scene` too (a wrapper above the env can draw it per episode).
     - v0, issue 45 (each default as before): `action_mode` ("velocity"; "waypoint") and `waypoint_scale`; `stack`
       ("full"; "light": no ground mask or single-image depth, a fixed latency of one 7.5 fps tracker period);
-      `camera_modality` ("rgb"; "thermal"), `time_of_day_h` and `thermal=`.
+      `camera_modality` ("rgb"; "thermal"), `time_of_day_h` and `thermal=`; `latency_compensation` (off; light: on).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": CAMERA_RATE_HZ}
@@ -191,7 +192,7 @@ class TradeFollowEnv(gym.Env):
         self._init_box: np.ndarray | None = None
         self._T_world_cam_true: Pose | None = None
         self._last_estimate = PerceptionOutput.missing()
-        self._estimate_delay: EstimateDelay[ScoredEstimate] | None = None
+        self._held_estimates: HeldEstimates | None = None
         self._estimate_age_s = 0.0
         self._needs_reset = True
         self._sensor_filter: SensorFilter | None = None
@@ -232,8 +233,8 @@ class TradeFollowEnv(gym.Env):
             self._advance([0.0] * ACTION_DIM)
         sensors, truth = self._sense()
         init_box = self._init_box = self._perturbed_init_box(truth.target_bbox, rng)
-        self._estimate_delay = (None if self.config.perception_latency == "none"
-                                else EstimateDelay(self._t_s, ScoredEstimate.missing()))
+        self._held_estimates = (None if self.config.perception_latency == "none"
+                                else HeldEstimates(self.config, self.camera.intrinsics, self._t_s))
         held = self._perceive(sensors, truth, lambda: self.perception.reset(sensors, init_box, rng))
         visible = truth.target_visible_fraction >= self.config.visible_fraction_threshold
         inputs = reward_inputs(truth, self.world, self._follow_band, self._state.position_m, visible, (), False)
@@ -336,19 +337,16 @@ class TradeFollowEnv(gym.Env):
         compute_s = time.perf_counter() - start_s
         self._last_sensors = sensors
         return self._held_estimate(score_estimate(estimate, truth, sensors.T_world_cam, self.camera.intrinsics),
-                                   compute_s)
+                                   compute_s, sensors.T_world_cam)
 
-    def _held_estimate(self, scored: ScoredEstimate, compute_s: float) -> ScoredEstimate:
-        """The estimate this frame's observation holds, given this frame's scored estimate and the wall-clock time
-        [s] perception took on it; sets its age and keeps its estimate for `render`."""
-        if self._estimate_delay is None:
+    def _held_estimate(self, scored: ScoredEstimate, compute_s: float, T_world_cam_est: Pose) -> ScoredEstimate:
+        """The estimate this frame's observation holds (`trade_gym.latency.HeldEstimates`), given this frame's scored
+        estimate, the wall-clock time [s] perception took on it and the camera pose perception received; sets its
+        age and keeps its estimate for `render`."""
+        if self._held_estimates is None:
             self._estimate_age_s, held = 0.0, scored
         else:
-            measured = self.config.perception_latency == "measured"
-            self._estimate_delay.push(scored, self._t_s, compute_s if measured else self.config.perception_latency_s)
-            delivered = self._estimate_delay.deliver(self._t_s)
-            self._estimate_age_s = self._t_s - delivered.frame_t_s
-            held = delivered.estimate
+            held, self._estimate_age_s = self._held_estimates.hold(scored, self._t_s, compute_s, T_world_cam_est)
         self._last_estimate = held.estimate
         return held
 

@@ -1,19 +1,27 @@
 """Perception latency: which estimate the observation holds at each camera frame.
 
 Owns `EstimateDelay`, a queue of estimates stamped with their frame's time and their arrival time: the estimate
-of frame k arrives at the first frame j with t_j >= t_k + latency_k, and the observation holds the newest arrived.
+of frame k arrives at the first frame j with t_j >= t_k + latency_k, and the observation holds the newest arrived;
+and `HeldEstimates`, the env's use of it: each frame's scored estimate in, the one its observation holds out, its box
+carried by the camera's rotation since its frame where the config asks for it (`EnvConfig.latency_compensation`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Generic, TypeVar
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Generic, TypeVar
+
+from trade.geometry import CameraIntrinsics, Pose, RotationWarp
+from trade_gym.scoring import ScoredEstimate
+
+if TYPE_CHECKING:
+    from trade_gym.config import EnvConfig
 
 # An estimate due at t counts as arrived at a frame of time >= t - tolerance [s]: the accumulated physics time
 # drifts by ~1e-15 s per frame, so a latency of a whole number of frames lands on its frame.
 ARRIVAL_TOLERANCE_S = 1e-9
 
-E = TypeVar("E")  # what is delayed: the env's scored estimate (`trade_gym.scoring.ScoredEstimate`)
+E = TypeVar("E")  # what is delayed: the env's scored estimate with its frame's camera pose (`HeldEstimates`)
 
 
 @dataclass(frozen=True)
@@ -56,3 +64,31 @@ class EstimateDelay(Generic[E]):
             if newest.frame_t_s >= self._current.frame_t_s:
                 self._current = newest
         return self._current
+
+
+class HeldEstimates:
+    """The estimate each observation holds under a config's latency mode (`EnvConfig.perception_latency`, not "none"):
+    `hold` takes a frame's scored estimate, the wall-clock time perception took on it and the camera pose perception
+    received, and returns the estimate held and its age [s]. With `latency_compensation` the box of an earlier frame's
+    estimate is carried to the current image by the camera's rotation between the two frames' poses (perception's, not
+    the true ones: `trade.geometry.RotationWarp`); its other entries are its frame's."""
+
+    def __init__(self, config: EnvConfig, intrinsics: CameraIntrinsics, reset_t_s: float) -> None:
+        self._measured = config.perception_latency == "measured"
+        self._latency_s = config.perception_latency_s
+        self._compensate = config.latency_compensation
+        self._intrinsics = intrinsics
+        missing: tuple[ScoredEstimate, Pose | None] = (ScoredEstimate.missing(), None)
+        self._delay: EstimateDelay[tuple[ScoredEstimate, Pose | None]] = EstimateDelay(reset_t_s, missing)
+
+    def hold(self, scored: ScoredEstimate, t_s: float, compute_s: float,
+             T_world_cam_est: Pose) -> tuple[ScoredEstimate, float]:
+        """(the estimate the observation at `t_s` [s] holds, its age [s]) after this frame's `scored` estimate."""
+        self._delay.push((scored, T_world_cam_est), t_s, compute_s if self._measured else self._latency_s)
+        delivered = self._delay.deliver(t_s)
+        held, T_world_cam_then = delivered.estimate
+        age_s = t_s - delivered.frame_t_s
+        if self._compensate and T_world_cam_then is not None and age_s > 0.0:
+            warp = RotationWarp.between(self._intrinsics, T_world_cam_then, T_world_cam_est)
+            held = replace(held, estimate=replace(held.estimate, bbox=warp.apply_box(held.estimate.bbox)))
+        return held, age_s

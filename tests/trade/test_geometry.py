@@ -86,3 +86,19 @@ def test_rotation_warp_maps_a_points_pixel_to_where_the_turned_camera_sees_it(se
     assert np.all(np.isnan(RotationWarp.between(K, T_first, Pose(T_first.R @ np.diag([1.0, -1.0, -1.0]),
                                                                    T_first.t)).apply(pixels[0])))
     np.testing.assert_allclose(RotationWarp.identity().apply(pixels[0]), pixels[0])
+
+
+def test_rotation_warp_moves_a_box_by_its_centre_and_keeps_its_size():
+    K = CameraIntrinsics.from_fov(256, 256, 60.0)
+    T_first = Pose.identity()
+    turn, _ = cv2.Rodrigues(np.array([0.05, -0.03, 0.1]))
+    warp = RotationWarp.between(K, T_first, Pose(turn, np.zeros(3)))
+    box = np.array([100.0, 60.0, 12.0, 20.0])
+    moved = warp.apply_box(box)
+    np.testing.assert_allclose(moved[:2] + moved[2:] / 2.0, warp.apply(box[:2] + box[2:] / 2.0))
+    np.testing.assert_array_equal(moved[2:], box[2:])
+    np.testing.assert_allclose(RotationWarp.identity().apply_box(box), box)
+    missing = np.full(4, np.nan)
+    assert np.all(np.isnan(warp.apply_box(missing)))
+    behind = RotationWarp.between(K, T_first, Pose(np.diag([1.0, -1.0, -1.0]), np.zeros(3)))
+    np.testing.assert_array_equal(behind.apply_box(box), box)  # its centre's ray turned behind: kept

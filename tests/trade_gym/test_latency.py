@@ -12,7 +12,8 @@ from gymnasium.utils.passive_env_checker import data_shares_objects
 
 from trade_gym.agents import ScriptedFollower
 from tests.trade_gym.test_determinism import single_digest
-from trade_gym.config import CAMERA_RATE_HZ
+from trade.geometry import RotationWarp
+from trade_gym.config import CAMERA_RATE_HZ, EnvConfig
 from trade_gym.env import TradeFollowEnv
 from trade_gym.latency import ARRIVAL_TOLERANCE_S, EstimateDelay
 from trade_gym.perception.base import PerceptionOutput
@@ -27,17 +28,19 @@ LATENCIES_MS = (50.0, 100.0)
 SEED = 3
 
 
-def _open_loop_run(seed: int, steps: int, **kwargs) -> list[dict]:
+def _open_loop_run(seed: int, steps: int, poses: bool = False, **kwargs) -> list[dict]:
     """Infos of a reset and `steps` steps under a fixed sequence of actions (the same in every env, so the
-    drone flies the same path whatever the observation holds)."""
+    drone flies the same path whatever the observation holds); with `poses` each also holds the camera pose
+    perception received ("pose")."""
     actions = np.random.default_rng(seed).uniform(-0.5, 0.5, (steps, 4)).astype(np.float32)
     env = TradeFollowEnv(**kwargs)
+    extra = (lambda: {"pose": env.delivered_sensors.T_world_cam}) if poses else dict
     try:
         obs, info = env.reset(seed=seed)
-        records = [info | {"obs": obs}]
+        records = [info | {"obs": obs} | extra()]
         for action in actions:
             obs, _, terminated, truncated, info = env.step(action)
-            records.append(info | {"obs": obs})
+            records.append(info | {"obs": obs} | extra())
             assert not (terminated or truncated)
     finally:
         env.close()
@@ -75,6 +78,36 @@ def test_fixed_latency_delivers_frame_k_at_first_frame_past_its_latency_frame_by
         assert _same(record["obs"]["drone_vel_mps"], undelayed[j]["obs"]["drone_vel_mps"])
     lag = [round(r["estimate_age_s"] / FRAME_S) for r in delayed[-5:]]
     assert lag == [math.ceil(latency_ms / 1000.0 / FRAME_S - 1e-6)] * 5
+
+
+def test_latency_compensation_carries_the_held_box_by_the_cameras_rotation_since_its_frame():
+    """Open loop (the same path either way), oracle at 100 ms: with compensation each held box is the uncompensated
+    one warped by the rotation between the poses perception received at its frame and now; nothing else differs."""
+    kwargs = ORACLE | dict(perception_latency="fixed", perception_latency_ms=100.0)
+    raw = _open_loop_run(SEED, STEPS, **kwargs)
+    carried = _open_loop_run(SEED, STEPS, **kwargs, latency_compensation=True, poses=True)
+    env = TradeFollowEnv(**ORACLE)
+    K = env.camera.intrinsics
+    env.close()
+    moved = 0
+    for j, (a, b) in enumerate(zip(raw, carried)):
+        assert a["t_s"] == b["t_s"] and _same(a["gt_bbox"], b["gt_bbox"])
+        assert _same(a["target_depth_est"], b["target_depth_est"]) and a["est_valid"] == b["est_valid"]
+        k = j - round(a["estimate_age_s"] / FRAME_S)
+        if a["estimate_age_s"] == 0.0 or not np.all(np.isfinite(a["est_bbox"])):
+            assert _same(a["est_bbox"], b["est_bbox"])
+            continue
+        warp = RotationWarp.between(K, carried[k]["pose"], b["pose"])
+        np.testing.assert_allclose(b["est_bbox"], warp.apply_box(a["est_bbox"]), atol=1e-9)
+        moved += not _same(a["est_bbox"], b["est_bbox"])
+    assert moved > STEPS // 2
+
+
+def test_only_the_light_stack_compensates_latency_by_default():
+    assert EnvConfig(stack="light").latency_compensation and not EnvConfig().latency_compensation
+    assert not EnvConfig(stack="light", latency_compensation=False).latency_compensation
+    with pytest.raises(ValueError, match="latency_compensation"):
+        EnvConfig(latency_compensation="yes")
 
 
 def test_held_estimate_is_not_shared_between_steps():
