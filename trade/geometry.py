@@ -158,7 +158,6 @@ class RotationWarp:
         x, y, w = self.H @ np.array([pixel_px[0], pixel_px[1], 1.0])
         return np.array([x / w, y / w]) if w > 0 else np.full(2, np.nan)
 
-
     def apply_box(self, bbox: FloatArray) -> FloatArray:
         """(4,) box (x, y, w, h) [px] in the earlier image -> in the later: its centre warped, its size kept; the box
         unchanged when it is not finite or its centre's ray turns behind the later camera."""
