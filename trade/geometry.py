@@ -162,8 +162,8 @@ class RotationWarp:
         """(4,) box (x, y, w, h) [px] in the earlier image -> in the later: its centre warped, its size kept; the box
         unchanged when it is not finite or its centre's ray turns behind the later camera."""
         x, y, w, h = (float(v) for v in bbox)
-        centre = self.apply(np.array([x + w / 2.0, y + h / 2.0]))
-        if not np.all(np.isfinite(centre)) or not (math.isfinite(w) and math.isfinite(h)):
+        centre = self.apply(np.array([x + w / 2.0, y + h / 2.0]))  # NaN for a NaN entry, as for a ray behind
+        if not np.all(np.isfinite(centre)):
             return np.asarray(bbox, dtype=np.float64)
         return np.array([centre[0] - w / 2.0, centre[1] - h / 2.0, w, h])
 

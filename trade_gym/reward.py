@@ -6,8 +6,9 @@ The terms sum to the reward (each is in `info["reward_<term>"]`):
   paid for what happens, not for what perception believes). It keeps the reward of a good frame positive,
   so ending the episode early never pays.
 - `distance`: `-distance_weight * (s min(d / r, 1) + (1 - s) min(d / h, 1))`, d the horizontal distance from
-  the drone to the target less the band's standoff (0 with the downward camera; see `FollowBand`), r the following band's distance (`trade_gym.scoring.FollowBand`: a quarter of the
-  camera footprint's half-width at the follow height, 4-11 m across the scenes), h the scene's follow height
+  the drone to the target less the band's standoff (0 with the downward camera), r the following band's distance
+  (`trade_gym.scoring.FollowBand`: a quarter of the camera footprint's half-width at the follow height, 4-11 m
+  across the scenes), h the scene's follow height
   and s `band_distance_share`. The band part makes letting the target leave the band cost most of the bonus;
   the follow-height part keeps a pull towards the target from farther off, where the band part is flat. A
   drone hovering at its start distance earns at most half of the scripted follower's return (tested), though

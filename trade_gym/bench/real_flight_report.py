@@ -38,6 +38,11 @@ def _time(record_or_switches: Mapping[str, Any]) -> str:
     return str(record_or_switches.get(TIME_OF_DAY_AXIS))
 
 
+def _run_time(run: RunResult) -> str:
+    """A run's time of day by name (`RunSpec.switch_value` of the named axis)."""
+    return str(run.spec.switch_value(TIME_OF_DAY_AXIS))
+
+
 def _ordered_times(values: Sequence[str]) -> list[str]:
     present = set(values)
     return [t for t in TIMES_OF_DAY if t in present]
@@ -116,19 +121,19 @@ def _per_world(run: RunResult | None) -> list[str]:
 def real_flight_worlds(runs: Sequence[RunResult]) -> list[str]:
     """The hours flown per scene, the failure classes counted per scene, time and perception for the crossover and
     the city, and a row per world of those (tracked fraction, success, failure classes per perception)."""
-    hours = {(r.spec.scene, _time(dict(r.spec.switches))): r.spec.env_kwargs()[HOUR_KEY] for r in runs}
+    hours = {(r.spec.scene, _run_time(r)): r.spec.env_kwargs()[HOUR_KEY] for r in runs}
     scenes = list(dict.fromkeys(r.spec.scene for r in runs))
     times = _ordered_times([t for _, t in hours])
     lines = ["Hours flown [h, solar time]: " + "; ".join(
         f"{scene} " + ", ".join(f"{t} {hours[scene, t]:g}" for t in times if (scene, t) in hours) for scene in scenes)
         + " (the crossover: `trade_gym.sim.thermal_crossover.morning_crossover`).", ""]
     perceptions = list(dict.fromkeys(r.spec.perception for r in runs))
-    shown = [r for r in runs if _time(dict(r.spec.switches)) == PER_WORLD_TIME or r.spec.scene == PER_WORLD_SCENE]
-    cells = list(dict.fromkeys((r.spec.scene, _time(dict(r.spec.switches))) for r in shown))
-    by_key = {(r.spec.scene, _time(dict(r.spec.switches)), r.spec.perception, r.spec.seed): r for r in shown}
+    shown = [r for r in runs if _run_time(r) == PER_WORLD_TIME or r.spec.scene == PER_WORLD_SCENE]
+    cells = list(dict.fromkeys((r.spec.scene, _run_time(r)) for r in shown))
+    by_key = {(r.spec.scene, _run_time(r), r.spec.perception, r.spec.seed): r for r in shown}
     counts, worlds = [], []
     for scene, time in cells:
-        mine = [r for r in shown if (r.spec.scene, _time(dict(r.spec.switches))) == (scene, time)]
+        mine = [r for r in shown if (r.spec.scene, _run_time(r)) == (scene, time)]
         row = [scene, time]
         for perception in perceptions:
             classes = Counter(c for r in mine if r.spec.perception == perception
