@@ -13,13 +13,17 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from trade.camera_pitch import NADIR_PITCH_DEG
 from trade.validation import is_finite_number, is_positive_number, require
 from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, DEFAULT_WAYPOINT_SCALE
 from trade_gym.agents.scripted import target_inputs
-from trade_gym.config import CAMERA_PITCH_RANGE_DEG, EnvConfig
+from trade_gym.config import CAMERA_FOV_RANGE_DEG, CAMERA_PITCH_RANGE_DEG, EnvConfig
 from trade_gym.sim.quadrotor import QuadrotorConfig
 
 WAYPOINT_MODE = "waypoint"  # the env's action_mode this follower flies
+# The least downward component of a box ray the pitched image servo divides by: a ray at or above the horizon meets
+# the ground beyond any offset the action can ask for (per unit ray: 1e-3 is 1000 servo heights away).
+MIN_RAY_DESCENT = 1e-3
 
 
 @dataclass(frozen=True)
@@ -35,9 +39,15 @@ class WaypointFollowerConfig:
     scripted follower's image servo does, and gives TRADE's triangulation its baseline. 20 m gave TRADE its first fix
     sooner (desert frame 44 instead of 71) but lost the DCF baseline's target (tracked fraction on development worlds
     0-1, mountain and city, 128 px, 300 frames: 0.12, 0.15, 0.01, 0.00 against 1.00, 0.69, 0.39, 0.08 at 12 m).
+    That is the downward camera's servo. A pitched camera's image is not linear in ground distance: at 45 deg a target
+    twice the standoff away sits a quarter of a half-image above the centre, where the linear servo asked for 3 m and
+    the drone fell behind a 3 m/s target (real-flight-tuning, desert 10212: 16 -> 30 m in 6 s). There the box's ray
+    is followed to flat ground from the servo height image_offset_m / tan(fov / 2), the height at which that ground
+    point mapping equals the linear servo for a downward camera (`_servo_image`).
     """
 
     camera_pitch_deg: float = EnvConfig.camera_pitch_deg  # must match the env's
+    camera_fov_deg: float = EnvConfig.camera_fov_deg  # must match the env's
     lead_time_s: float = 1.0 / QuadrotorConfig.position_gain_horizontal_per_s
     image_offset_m: float = 12.0
     # the env's waypoint scale (`env.waypoint_scale`) [m per unit action]
@@ -49,18 +59,21 @@ class WaypointFollowerConfig:
             require(is_positive_number(getattr(self, name)), f"{c}.{name}", getattr(self, name), "a finite number > 0")
         require(is_finite_number(self.lead_time_s) and self.lead_time_s >= 0.0, f"{c}.lead_time_s", self.lead_time_s,
                 "a finite number >= 0 [s]")
+        low, high = CAMERA_FOV_RANGE_DEG
+        require(is_finite_number(self.camera_fov_deg) and low <= self.camera_fov_deg <= high,
+                f"{c}.camera_fov_deg", self.camera_fov_deg, f"in [{low}, {high}] (the env's range)")
         low, high = CAMERA_PITCH_RANGE_DEG
         require(is_finite_number(self.camera_pitch_deg) and low <= self.camera_pitch_deg <= high,
                 f"{c}.camera_pitch_deg", self.camera_pitch_deg, f"in [{low}, {high}] (the env's range)")
 
     @classmethod
     def of(cls, config: EnvConfig) -> WaypointFollowerConfig:
-        """The follower's settings for an env built with `config`: its camera pitch, waypoint scale and position
-        gain. ValueError unless the env flies waypoints (`action_mode="waypoint"`)."""
+        """The follower's settings for an env built with `config`: its camera pitch and field of view, waypoint scale
+        and position gain. ValueError unless the env flies waypoints (`action_mode="waypoint"`)."""
         if config.action_mode != WAYPOINT_MODE:
             raise ValueError(f"WaypointFollower sends position setpoints and needs an env with "
                              f"action_mode={WAYPOINT_MODE!r}, got action_mode={config.action_mode!r}")
-        return cls(camera_pitch_deg=config.camera_pitch_deg,
+        return cls(camera_pitch_deg=config.camera_pitch_deg, camera_fov_deg=config.camera_fov_deg,
                    lead_time_s=1.0 / config.quadrotor.position_gain_horizontal_per_s,
                    max_offset_horizontal_m=config.waypoint_scale.max_offset_horizontal_m)
 
@@ -112,11 +125,24 @@ class WaypointFollower:
         return rel[:2] + cfg.lead_time_s * vel[:2] - np.array([ahead_m, 0.0])
 
     def _servo_image(self, bbox_norm: np.ndarray) -> np.ndarray:
-        """(forward, left) [m] towards the box centre (none without a box: hold position)."""
+        """(forward, left) [m] towards the box centre (none without a box: hold position). A downward camera: the
+        offset is `image_offset_m` per half-image. A pitched one (pitch p): the box centre's ray (X, Y) = (right,
+        down) tan(fov / 2) in the camera, in the level heading frame (c - s Y, -X, -(c Y + s)) with (c, s) = (cos p,
+        sin p), meets flat ground h = image_offset_m / tan(fov / 2) below at h (c - s Y, -X) / (c Y + s); the offset
+        is that point less the optical axis's, (h c / s, 0). At p = 90 deg this is the downward camera's offset; a ray
+        at or above the horizon asks for the farthest offset forward the action allows (`_scaled` clips it)."""
         if not np.any(bbox_norm):
             return np.zeros(2)
+        cfg = self.config
         right, down = 2.0 * (bbox_norm[:2] - 0.5)  # half-image units
-        return -self.config.image_offset_m * np.array([down, right])
+        if cfg.camera_pitch_deg >= NADIR_PITCH_DEG:
+            return -cfg.image_offset_m * np.array([down, right])
+        slope = math.tan(math.radians(cfg.camera_fov_deg) / 2.0)
+        x, y, height_m = right * slope, down * slope, cfg.image_offset_m / slope
+        pitch = math.radians(cfg.camera_pitch_deg)
+        c, s = math.cos(pitch), math.sin(pitch)
+        descent = max(c * y + s, MIN_RAY_DESCENT)
+        return height_m * np.array([(c - s * y) / descent - c / s, -x / descent])
 
     def _scaled(self, offsets: np.ndarray) -> np.ndarray:
         """(N, 2) offsets [m] as actions: over the waypoint scale, the horizontal norm clipped to 1 (direction kept)."""

@@ -11,6 +11,7 @@ from trade_gym.agents import WaypointFollower, WaypointFollowerConfig
 from trade_gym.config import EnvConfig
 from trade_gym.env import TradeFollowEnv
 from trade_gym.rollout import fly_episode
+from trade_gym.sim.camera import mount_rotation
 
 MIN_VISIBLE_FRACTION = 0.95
 EPISODE_STEPS = 900  # the full 30 s
@@ -83,6 +84,30 @@ def test_before_a_3d_estimate_it_servos_towards_the_box_and_without_one_holds_po
     np.testing.assert_array_equal(action, np.zeros(4, np.float32))
 
 
+@pytest.mark.parametrize("down", [-0.6, -0.25, 0.3])
+def test_a_pitched_cameras_servo_flies_to_where_the_box_ray_meets_the_ground_from_the_servo_height(down):
+    """At 45 deg, from the camera's own mount (`mount_rotation`): the box centre's ray meets flat ground h below, h
+    the servo height image_offset_m / tan(fov / 2); the offset is that point less the optical axis's."""
+    config = WaypointFollowerConfig(camera_pitch_deg=45.0, max_offset_horizontal_m=1000.0)
+    slope = math.tan(math.radians(config.camera_fov_deg) / 2.0)
+    height_m, right = config.image_offset_m / slope, 0.2
+    ray_body = mount_rotation(45.0) @ np.array([right * slope, down * slope, 1.0])  # x forward, y left, z up
+    axis_body = mount_rotation(45.0) @ np.array([0.0, 0.0, 1.0])
+    ground = lambda ray: ray[:2] * height_m / -ray[2]  # noqa: E731
+    expected = ground(ray_body) - ground(axis_body)
+    bbox = (0.5 + right / 2.0, 0.5 + down / 2.0, 0.05, 0.1)
+    action, _ = WaypointFollower(config).predict(_obs(bbox=bbox))
+    np.testing.assert_allclose(action[:2] * config.max_offset_horizontal_m, expected, rtol=1e-5, atol=1e-5)
+    centred, _ = WaypointFollower(config).predict(_obs(bbox=(0.5, 0.5, 0.05, 0.1)))
+    np.testing.assert_allclose(centred, np.zeros(4), atol=1e-6)
+
+
+def test_a_pitched_cameras_servo_asks_for_the_farthest_forward_offset_for_a_ray_above_the_horizon():
+    config = WaypointFollowerConfig(camera_pitch_deg=30.0, camera_fov_deg=110.0)  # the top rows look 25 deg up
+    action, _ = WaypointFollower(config).predict(_obs(bbox=(0.5, 0.02, 0.05, 0.05)))
+    np.testing.assert_allclose(action, [1.0, 0.0, 0.0, 0.0], atol=1e-6)
+
+
 def test_batch_and_single_observations_agree():
     observations = [_obs(rel=(3.0, -2.0, -16.0), vel=(2.0, 0.5, 0.0)), _obs(bbox=(0.6, 0.4, 0.05, 0.1)), _obs()]
     follower = WaypointFollower()
@@ -93,7 +118,7 @@ def test_batch_and_single_observations_agree():
 
 
 @pytest.mark.parametrize("bad", [{"lead_time_s": -1.0}, {"image_offset_m": 0.0}, {"camera_pitch_deg": 10.0},
-                                 {"max_offset_horizontal_m": math.nan}])
+                                 {"max_offset_horizontal_m": math.nan}, {"camera_fov_deg": 200.0}])
 def test_bad_follower_setting_raises_naming_it(bad):
     (name,) = bad
     with pytest.raises(ValueError, match=f"WaypointFollowerConfig.{name} must be"):
