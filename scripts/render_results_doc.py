@@ -102,10 +102,9 @@ SECTIONS = (
         "flight; TRADE against DCF at night (2 h), at the scene's morning crossover (the hour at which its target's "
         "parked twin comes nearest the terrain's temperature, `trade_gym.sim.thermal_crossover`) and by day (13 h); "
         "one 450-frame run at 256 px per evaluation world, the paper's start protocol. What the camera sees at those "
-        "hours: [environment.md](../environment.md#thermal-camera). The following band (and so success) assumes a "
-        "downward camera: at 45 deg the waypoint follower's nominal place, h / tan(45 deg) = h behind the target, "
-        "lies outside it, so success is no measure of following here; the gate is on the tracked fraction and "
-        "collisions.", ("real_flight",)),
+        "hours: [environment.md](../environment.md#thermal-camera). The following band (and so success) is centred on "
+        "the camera's standoff, h / tan(45 deg) = h behind the target (`trade_gym.scoring.FollowBand`); the gate is "
+        "on the tracked fraction and collisions.", ("real_flight",)),
 )
 
 
