@@ -46,7 +46,10 @@ SUITE_HELP = ("quick (make demo, ~1-3 min), paper (the paper's "
               "720 runs; a strip of frames per failed world), real-flight (the paper's onboard setup: thermal camera at "
               "45 deg, light stack, waypoint follower, vio pose, TRADE and DCF at night, the morning crossover and "
               "by day on the 20 evaluation worlds per scene, 360 runs, ~1.5 h with --jobs 2), real-flight-tuning (the "
-              "real-flight grid on 10 training worlds per scene, to tune on), full "
+              "real-flight grid on 10 training worlds per scene, to tune on), thermal (full TRADE on the thermal camera, "
+              "scripted, gt pose, at night, the crossover and by day, every evaluation world, and the light stack's "
+              "ground depth at night and by day in desert and mountain, 260 runs, ~45 min with --jobs 2), "
+              "thermal-tuning (the thermal grid on the tuning suite's development worlds), full "
               "(paper tables at full length plus all followers, hours)")
 
 

@@ -71,7 +71,7 @@ def refuse_evaluation_worlds(seeds: Iterable[int], what: str) -> None:
         if seed in EVALUATION:
             raise EvaluationWorldError(
                 f"{what}: world seed {seed} is in the {EVALUATION} split, which only trade-bench's evaluation "
-                f"suites (--suite unseen, breadth, unseen-depth, real-flight) use; take development ({DEVELOPMENT.first}..{DEVELOPMENT.last}) or "
+                f"suites (--suite unseen, breadth, unseen-depth, real-flight, thermal) use; take development ({DEVELOPMENT.first}..{DEVELOPMENT.last}) or "
                 f"training ({TRAINING.first}..) worlds")
 
 

@@ -19,7 +19,7 @@ from trade_gym.sim.thermal_crossover import TIMES_OF_DAY, time_of_day_h
 
 Kwargs = tuple[tuple[str, Any], ...]  # sorted (name, value) pairs: hashable env keyword arguments
 # Which table a group renders in results.md (and how its runs are compared).
-GROUP_KINDS = ("follow", "tracking", "table1", "table2", "unseen", "latency", "breadth", "real_flight", "custom")
+GROUP_KINDS = ("follow", "tracking", "table1", "table2", "unseen", "latency", "breadth", "real_flight", "thermal", "custom")
 BOOL_SWITCHES = tuple(f.name for f in fields(EnvConfig) if f.type == "bool")
 # The paper's protocol: one sequence per scene (a fixed world), each run of it with its first tracked
 # frame shifted within 10 frames and its initial box perturbed within 5 px (and its own sensor noise);
@@ -65,6 +65,13 @@ TIME_OF_DAY_AXIS = "time_of_day"
 # `real-flight-tuning`: the same grid on 10 training worlds per scene, past the breadth group's: where its failures
 # are found and fixed, since the evaluation worlds only report.
 REAL_FLIGHT_TUNING_WORLDS = (TRAINING.first + 210, TRAINING.first + 219)
+# Thermal tracking (issue 45): the unseen suite's full TRADE runs (scripted follower, downward camera, gt pose, the
+# paper's start protocol) on the thermal camera at night, at the scene's morning crossover and by day; then the light
+# stack's ground depth at night and by day in the scenes its gate names. `thermal-tuning` is the same grid on the
+# tuning suite's development worlds (benchmarks/thermal_tracking.py flies those one at a time, with traces).
+THERMAL_ENV: Kwargs = (("camera_modality", "thermal"),)
+THERMAL_LIGHT_SCENES = ("desert", "mountain")
+THERMAL_LIGHT_TIMES = ("night", "day")
 
 
 @dataclass(frozen=True)
@@ -308,6 +315,20 @@ def _real_flight_groups(steps: int, camera_size: int, worlds: tuple[int, int] = 
     )
 
 
+def _thermal_groups(steps: int, camera_size: int, worlds: tuple[int, int] = UNSEEN_WORLDS,
+                    split: str = "evaluation") -> tuple[GroupSpec, ...]:
+    return (
+        GroupSpec("thermal", "thermal", "Thermal camera: full TRADE, scripted follower, gt pose, at night, at the "
+                  f"morning crossover and by day, one run per {split} world", ALL_SCENES, ("scripted",), ("trade",),
+                  ("gt",), worlds, steps, camera_size, ((TIME_OF_DAY_AXIS, TIMES_OF_DAY),),
+                  UNSEEN_PROTOCOL + THERMAL_ENV),
+        GroupSpec("thermal_light", "thermal", "Thermal camera: the light stack's ground depth, scripted follower, gt "
+                  f"pose, at night and by day, one run per {split} world", THERMAL_LIGHT_SCENES, ("scripted",),
+                  ("trade",), ("gt",), worlds, steps, camera_size, ((TIME_OF_DAY_AXIS, THERMAL_LIGHT_TIMES),),
+                  UNSEEN_PROTOCOL + THERMAL_ENV + (("stack", "light"),)),
+    )
+
+
 PAPER_STEPS, FULL_STEPS = 450, 900  # 15 s sequences (about an hour on 2 cores); the env's full 30 s
 PAPER_CAMERA_PX = 256
 
@@ -322,6 +343,8 @@ SUITES: dict[str, tuple[GroupSpec, ...]] = {
     "unseen-depth": _depth_finder_groups(DEPTH_FINDER_STEPS, PAPER_CAMERA_PX),
     "real-flight": _real_flight_groups(PAPER_STEPS, PAPER_CAMERA_PX),
     "real-flight-tuning": _real_flight_groups(PAPER_STEPS, PAPER_CAMERA_PX, REAL_FLIGHT_TUNING_WORLDS, "training"),
+    "thermal": _thermal_groups(PAPER_STEPS, PAPER_CAMERA_PX),
+    "thermal-tuning": _thermal_groups(PAPER_STEPS, PAPER_CAMERA_PX, TUNING_WORLDS, "development"),
     "full": _paper_groups(FULL_STEPS, PAPER_CAMERA_PX) + (
         GroupSpec("policies", "follow", "Followers on oracle and TRADE perception",
                   ALL_SCENES, ("scripted", "learned", "waypoint", "hover", "random"), ("oracle", "trade"), ("gt",),
@@ -329,10 +352,11 @@ SUITES: dict[str, tuple[GroupSpec, ...]] = {
     ),
 }
 SUITE_JOBS = {"quick": 2, "paper": 2, "unseen": 2, "tuning": 2, "latency": 2, "breadth": 2, "breadth-tuning": 2,
-              "unseen-depth": 2, "real-flight": 2, "real-flight-tuning": 2, "full": 2}  # default --jobs per suite
+              "unseen-depth": 2, "real-flight": 2, "real-flight-tuning": 2, "thermal": 2, "thermal-tuning": 2,
+              "full": 2}  # default --jobs per suite
 # Suites that fly evaluation worlds; no other suite or grid may (`trade_gym.bench.splits`). Besides them, they may
 # fly training worlds (the depth finder's group to tune on), never development worlds.
-EVALUATION_SUITES = ("unseen", "breadth", "unseen-depth", "real-flight")
+EVALUATION_SUITES = ("unseen", "breadth", "unseen-depth", "real-flight", "thermal")
 
 # A run without --suite: one grid of the chosen axes, these defaults where nothing was chosen.
 CUSTOM_DEFAULTS = GroupSpec("custom", "custom", "Custom grid", ALL_SCENES, ("scripted",), ("oracle",), ("gt",),
