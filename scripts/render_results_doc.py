@@ -105,6 +105,13 @@ SECTIONS = (
         "hours: [environment.md](../environment.md#thermal-camera). The following band (and so success) is centred on "
         "the camera's standoff, h / tan(45 deg) = h behind the target (`trade_gym.scoring.FollowBand`); the gate is "
         "on the tracked fraction and collisions.", ("real_flight",)),
+    Section("thermal", "Thermal camera: full TRADE and the light stack (evaluation worlds)",
+        "`trade-bench --suite thermal`: the unseen suite's full TRADE runs (scripted follower, downward camera, "
+        "ground-truth pose, the paper's start protocol) on the Boson-like thermal camera (`camera_modality=\"thermal\"`) "
+        "at night (2 h), at the scene's morning crossover and by day (13 h) in every scene; then the light stack "
+        "(`stack=\"light\"`: no ground mask or single-image depth, estimates one 7.5 fps period late) at night and by "
+        "day in desert and mountain, for its ground depth. One 450-frame run at 256 px per evaluation world. What the "
+        "camera sees at those hours: [environment.md](../environment.md#thermal-camera).", ("thermal",)),
 )
 
 

@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import matplotlib
@@ -16,6 +16,7 @@ import numpy.typing as npt  # noqa: E402
 
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M, FAIL_TRACKED_FRACTION  # noqa: E402
 from trade_gym.bench.real_flight_report import GATE_TRACKED_FRACTION  # noqa: E402
+from trade_gym.bench.thermal_report import GOOD_TRACKED_FRACTION  # noqa: E402
 from trade_gym.bench.runner import RunResult, RunSeries  # noqa: E402
 from trade_gym.bench.suites import TIME_OF_DAY_AXIS, RunSpec  # noqa: E402
 from trade_gym.bench.summary import config_label, metric_values, spec_record  # noqa: E402
@@ -215,7 +216,7 @@ def plot_group(results: Sequence[RunResult], group: str, depth_kind: str, out: P
     depth = f"{depth_kind}_depth_error_m"
     kind = results[0].spec.kind if results else None
     strip = [plot_strip(results, f"{group}: one dot per world", out / f"{group}_per_world.png")] \
-        if kind in ("unseen", "real_flight") else []
+        if kind in ("unseen", "real_flight", "thermal") else []
     strip += [plot_latency(results, f"{group}: metric against latency", out / f"{group}_vs_latency.png")] \
         if kind == "latency" else []
     written = strip + [
@@ -262,41 +263,53 @@ def plot_breadth(results: Sequence[RunResult], path: Path) -> Path | None:
 BAR_WIDTH = 0.38  # of one time of day's slot, per perception (two side by side)
 
 
-def plot_real_flight(results: Sequence[RunResult], path: Path) -> Path | None:
-    """Tracked fraction by time of day, one panel per scene: a bar per perception (the mean over worlds), a dot per
-    world, the acceptance gate dashed; None without real-flight runs."""
-    runs = [r for r in results if r.spec.kind == "real_flight" and r.error is None]
-    if not runs:
-        return None
+def _plot_by_time_of_day(runs: Sequence[RunResult], path: Path, series: Callable[[RunResult], str],
+                         gate: float) -> Path:
+    """Tracked fraction by time of day, one panel per scene: a bar per series (the mean over worlds), a dot per
+    world, the gate dashed."""
     scenes = list(dict.fromkeys(r.spec.scene for r in runs))
-    perceptions = list(dict.fromkeys(r.spec.perception for r in runs))
+    names = list(dict.fromkeys(series(r) for r in runs))
     present = {r.spec.switch_value(TIME_OF_DAY_AXIS) for r in runs}
     times = [t for t in TIMES_OF_DAY if t in present]
     fig, axes = plt.subplots(1, len(scenes), figsize=(3.2 * len(scenes), 3.2), squeeze=False, sharey=True)
     jitter = np.random.default_rng(0)  # a fixed jitter: the same results draw the same figure
     for ax, scene in zip(axes[0], scenes):
-        for i, perception in enumerate(perceptions):
-            x = np.arange(len(times)) + (i - (len(perceptions) - 1) / 2) * BAR_WIDTH
-            values = [np.array(metric_values([r for r in runs if (r.spec.scene, r.spec.perception) == (scene, perception)
+        for i, name in enumerate(names):
+            x = np.arange(len(times)) + (i - (len(names) - 1) / 2) * BAR_WIDTH
+            values = [np.array(metric_values([r for r in runs if (r.spec.scene, series(r)) == (scene, name)
                                               and r.spec.switch_value(TIME_OF_DAY_AXIS) == t], "tracked_fraction"))
                       for t in times]
             means = [float(np.nanmean(v)) if np.isfinite(v).any() else np.nan for v in values]
-            ax.bar(x, means, BAR_WIDTH, color=f"C{i}", alpha=0.6, label=perception)
+            ax.bar(x, means, BAR_WIDTH, color=f"C{i}", alpha=0.6, label=name)
             for xi, v in zip(x, values):
                 ax.plot(xi + jitter.uniform(-STRIP_JITTER, STRIP_JITTER, len(v)) * BAR_WIDTH, v, ".", ms=3,
                         color=f"C{i}")
-        ax.axhline(GATE_TRACKED_FRACTION, color="k", ls="--", lw=0.8)
+        ax.axhline(gate, color="k", ls="--", lw=0.8)
         ax.set_xticks(np.arange(len(times)), times, fontsize=8)
         ax.set(title=scene, ylim=(0, 1.05))
         ax.grid(alpha=0.3, axis="y")
-    axes[0][0].set_ylabel(f"tracked fraction (gate {GATE_TRACKED_FRACTION:g} dashed)")
+    axes[0][0].set_ylabel(f"tracked fraction (gate {gate:g} dashed)")
     axes[0][-1].legend(fontsize=LEGEND_FONT_SIZE)
     return _save(fig, path)
+
+
+def plot_real_flight(results: Sequence[RunResult], path: Path) -> Path | None:
+    """The real-flight suite's tracked fraction by time of day, a bar per perception; None without its runs."""
+    runs = [r for r in results if r.spec.kind == "real_flight" and r.error is None]
+    return _plot_by_time_of_day(runs, path, lambda r: r.spec.perception, GATE_TRACKED_FRACTION) if runs else None
+
+
+def plot_thermal(results: Sequence[RunResult], path: Path) -> Path | None:
+    """The thermal suite's tracked fraction by time of day, a bar per stack (full, light); None without its runs."""
+    runs = [r for r in results if r.spec.kind == "thermal" and r.error is None]
+    return _plot_by_time_of_day(runs, path, lambda r: f"{r.spec.env_kwargs().get('stack', 'full')} stack",
+                                GOOD_TRACKED_FRACTION) if runs else None
 
 
 def plot_suite(results: Sequence[RunResult], out: Path) -> list[Path]:
     """The figures across a suite's groups (the breadth suite's success rate by tier and motion, the real-flight
     suite's tracked fraction by time of day)."""
     figures = (plot_breadth(results, out / "breadth_success.png"),
-               plot_real_flight(results, out / "real_flight_by_time_of_day.png"))
+               plot_real_flight(results, out / "real_flight_by_time_of_day.png"),
+               plot_thermal(results, out / "thermal_by_time_of_day.png"))
     return [p for p in figures if p is not None]

@@ -118,15 +118,20 @@ def _per_world(run: RunResult | None) -> list[str]:
             "; ".join(failure_classes(m, run.error)) or NO_FAILURE]
 
 
-def real_flight_worlds(runs: Sequence[RunResult]) -> list[str]:
-    """The hours flown per scene, the failure classes counted per scene, time and perception for the crossover and
-    the city, and a row per world of those (tracked fraction, success, failure classes per perception)."""
+def hours_flown(runs: Sequence[RunResult]) -> list[str]:
+    """'Hours flown [h, solar time]: ' per scene, each time of day's hour."""
     hours = {(r.spec.scene, _run_time(r)): r.spec.env_kwargs()[HOUR_KEY] for r in runs}
     scenes = list(dict.fromkeys(r.spec.scene for r in runs))
     times = _ordered_times([t for _, t in hours])
-    lines = ["Hours flown [h, solar time]: " + "; ".join(
+    return ["Hours flown [h, solar time]: " + "; ".join(
         f"{scene} " + ", ".join(f"{t} {hours[scene, t]:g}" for t in times if (scene, t) in hours) for scene in scenes)
         + " (the crossover: `trade_gym.sim.thermal_crossover.morning_crossover`).", ""]
+
+
+def real_flight_worlds(runs: Sequence[RunResult]) -> list[str]:
+    """The hours flown per scene, the failure classes counted per scene, time and perception for the crossover and
+    the city, and a row per world of those (tracked fraction, success, failure classes per perception)."""
+    lines = hours_flown(runs)
     perceptions = list(dict.fromkeys(r.spec.perception for r in runs))
     shown = [r for r in runs if _run_time(r) == PER_WORLD_TIME or r.spec.scene == PER_WORLD_SCENE]
     cells = list(dict.fromkeys((r.spec.scene, _run_time(r)) for r in shown))

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M, FAIL_TRACKED_FRACTION
 from trade_gym.bench.real_flight_report import real_flight_pivot, real_flight_worlds
+from trade_gym.bench.thermal_report import thermal_pivot, thermal_worlds
 from trade_gym.bench.summary import config_label
 from trade_gym.bench.tables import MISSING, fmt, mean_pm, pooled_mean, rate_cell, table, with_frames
 from trade_gym.metrics import GROUND_OFF_M
@@ -241,9 +242,11 @@ def breadth_headline(summary: Sequence[Record]) -> list[str]:
 
 
 PIVOTS = {"table1": table1_pivot, "table2": table2_pivot, "tracking": tracking_pivot, "follow": follow_pivot,
-          "unseen": unseen_pivot, "latency": latency_pivot, "breadth": breadth_pivot, "real_flight": real_flight_pivot}
+          "unseen": unseen_pivot, "latency": latency_pivot, "breadth": breadth_pivot, "real_flight": real_flight_pivot,
+          "thermal": thermal_pivot}
 # Tables of a kind made from its runs rather than its summary records (per world, and what each run was flown with)
-RUN_TABLES: dict[str, Callable[[Sequence[RunResult]], list[str]]] = {"real_flight": real_flight_worlds}
+RUN_TABLES: dict[str, Callable[[Sequence[RunResult]], list[str]]] = {"real_flight": real_flight_worlds,
+                                                                     "thermal": thermal_worlds}
 
 
 def machine(meta: Record) -> str:
