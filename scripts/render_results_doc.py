@@ -157,6 +157,12 @@ HEADLINES = (
              "scored against the current frame's truth; (n) = runs. A mean over scenes hides the one that breaks "
              "first: the full page has a row per scene.",
              "latency", headlines.latency_table, "latency_vs_latency.png", "latency"),
+    Headline("Does TRADE track on a thermal camera?",
+             "The unseen suite's full TRADE runs on the thermal camera at night, at the scene's morning crossover "
+             "(target and terrain nearest in temperature) and by day, one run per evaluation world: the worlds "
+             "tracked >= 0.95 with no decoy switch, of those flown (mean tracked fraction); then the light stack's "
+             "ground-depth RMSE pooled over its night and day runs.",
+             "thermal", headlines.thermal_table, "thermal_by_time_of_day.png", "thermal"),
 )
 SPEED_ABOUT = ("Env steps per second in one process, measured by `benchmarks/speed.py` on one machine at one moment: "
                "with oracle perception and no rendering, with rendering at 256 px, and with full TRADE perception at 256 px, the camera's rate being 30 (records "

@@ -9,7 +9,7 @@ import json
 import sys
 from pathlib import Path
 
-from trade_gym.bench import cli, runner
+from trade_gym.bench import cli, headlines, runner
 from trade_gym.bench.plots import plot_suite
 from trade_gym.bench.report import render_markdown
 from trade_gym.bench.results import load_results
@@ -146,3 +146,13 @@ def test_a_tiny_thermal_run_of_both_stacks_writes_results_that_reload_and_render
     page = doc_module.render_section(section)
     assert page.startswith(f"# {section.title}") and f"Command: `trade-bench {' '.join(argv)}`" in page
     assert "Acceptance (issue 45), full TRADE" in page and "Acceptance (issue 45), light stack" in page
+
+
+def test_summary_table_counts_good_worlds_per_scene_and_time_and_pools_the_light_stacks_rmse():
+    results = [_result("thermal", "desert", "night", 1, 1.0), _result("thermal", "desert", "night", 2, 0.9),
+               _result("thermal", "desert", "day", 1, 0.99, switches=1),
+               _result("thermal_light", "desert", "night", 1, 0.97, rmse_m=0.6, frames=300),
+               _result("thermal_light", "desert", "day", 1, 0.97, rmse_m=1.2, frames=100)]
+    lines = headlines.thermal_table(results)
+    assert lines[0] == "| scene | full TRADE, night | full TRADE, day | light stack ground RMSE [m] |"
+    assert lines[2] == "| desert | 1 of 2 (0.95) | 0 of 1 (0.99) | 0.794 |"

@@ -12,6 +12,8 @@ from trade_gym.bench.failures import FAIL_GROUND_RMSE_M
 from trade_gym.bench.runner import RunResult
 from trade_gym.bench.summary import metric_stats, metric_values, pooled_rmse, summarise
 from trade_gym.bench.tables import MISSING, fmt, pooled_mean, table
+from trade_gym.bench.thermal_report import good_world
+from trade_gym.sim.thermal_crossover import TIMES_OF_DAY
 
 Record = dict[str, Any]
 # The paper's Table 1, full TRADE: pooled ground-depth RMSE [m] with (ground-truth, VIO) pose per scene.
@@ -133,6 +135,30 @@ def latency_table(results: Sequence[RunResult]) -> list[str]:
         rows.append(row)
     header = ["latency [ms]"] + [f"{p}: {what}" for p in policies for what in ("error [m]", "tracked")]
     return table(header, rows)
+
+
+def thermal_table(results: Sequence[RunResult]) -> list[str]:
+    """Per scene (rows) and time of day (columns), full TRADE on the thermal camera: the worlds tracked >= 0.95 with no
+    decoy switch, of the worlds flown, and the mean tracked fraction; then per scene the light stack's ground RMSE
+    [m] pooled over its frames."""
+    ok = [r for r in results if r.error is None]
+    full = [r for r in ok if r.spec.env_kwargs().get("stack", "full") == "full"]
+    light = [r for r in ok if r.spec.env_kwargs().get("stack") == "light"]
+    present = {r.spec.switch_value("time_of_day") for r in full}
+    times = [t for t in TIMES_OF_DAY if t in present]
+    rows = []
+    for scene in _unique([r.spec.scene for r in full]):
+        row = [scene]
+        for time in times:
+            mine = [r for r in full if (r.spec.scene, r.spec.switch_value("time_of_day")) == (scene, time)]
+            tracked = metric_stats(metric_values(mine, "tracked_fraction"))
+            row.append(f"{sum(good_world(r.metrics) for r in mine)} of {len(mine)} ({fmt(tracked['mean'], RATE_DIGITS)})"
+                       if mine else MISSING)
+        mine = [r for r in light if r.spec.scene == scene]
+        row.append(fmt(pooled_rmse(metric_values(mine, "ground_depth_rmse_m"),
+                                   metric_values(mine, "ground_depth_frames"))) if mine else MISSING)
+        rows.append(row)
+    return table(["scene"] + [f"full TRADE, {t}" for t in times] + ["light stack ground RMSE [m]"], rows)
 
 
 def speed_table(records: Sequence[Mapping[str, Any]]) -> list[str]:
