@@ -28,9 +28,10 @@ NODE_OBJECT_STORE_BYTES = 80 * 2**20  # Ray's minimum is 75 MiB; results are a f
 ORACLE_STEPS, TRADE_STEPS, SHORT_STEPS = 25, 20, 8
 TRADE_CAMERA_PX = 64
 HOLD_S = 120.0  # a run that starts on the node to be removed waits there this long (the node goes first)
-REMOVE_TIMEOUT_S = 90.0  # how long the remover waits for a held run and a first result
+REMOVE_TIMEOUT_S = 2 * HOLD_S  # how long the remover waits for a held run and a first result
 ATTEMPTS_LOG = "attempts.log"
 HELD_MARKER = "held"
+MARKER_POLL_S = 0.05
 NODE_DEATH_TIMEOUT_S = 60.0  # until Ray has marked a killed node dead
 
 
@@ -60,17 +61,24 @@ def nodes(cluster):
     return cluster
 
 
-def on_node(log_dir: str, hold_on: str | None, spec: RunSpec) -> runner.RunResult:
+def on_node(log_dir: str, hold_on: str | None, spec: RunSpec, others_wait: bool = False) -> runner.RunResult:
     """Log the run id and node id of this attempt in `log_dir`; on node `hold_on`, mark it and wait there (until
-    the test removes that node), then run the spec."""
+    the test removes that node), then run the spec. `others_wait`: an attempt on another node first waits (up to
+    HOLD_S) for that mark, so the runs cannot all finish elsewhere before the added node has taken one: each node
+    has one CPU, so with the others' CPUs busy waiting, Ray must place a run on it, however slowly it starts."""
     import ray
 
     node = ray.get_runtime_context().get_node_id()
     with (Path(log_dir) / ATTEMPTS_LOG).open("a") as f:
         f.write(f"{spec.run_id} {node}\n")
+    marker = Path(log_dir) / HELD_MARKER
     if node == hold_on:
-        (Path(log_dir) / HELD_MARKER).touch()
+        marker.touch()
         time.sleep(HOLD_S)
+    elif others_wait:
+        deadline = time.monotonic() + HOLD_S
+        while not marker.exists() and time.monotonic() < deadline:
+            time.sleep(MARKER_POLL_S)
     return runner.run_spec(spec)
 
 
@@ -112,7 +120,7 @@ def _remove_when_held(cluster, node, log_dir: Path, first_result: threading.Even
     while not ((log_dir / HELD_MARKER).exists() and first_result.is_set()):
         if time.monotonic() > deadline:
             return
-        time.sleep(0.05)
+        time.sleep(MARKER_POLL_S)
     cluster.remove_node(node, allow_graceful=False)
     removed.set()
 
@@ -131,7 +139,8 @@ def test_node_lost_mid_suite_costs_only_its_run_retried_on_another_node(nodes, t
         first_result.set()
 
     with caplog.at_level(logging.WARNING, logger=executors.__name__):
-        on_ray = RayExecutor(task=functools.partial(on_node, str(tmp_path), doomed.node_id)).map(specs, on_done)
+        on_ray = RayExecutor(task=functools.partial(on_node, str(tmp_path), doomed.node_id, others_wait=True)).map(
+            specs, on_done)
     remover.join(REMOVE_TIMEOUT_S)
     assert removed.is_set(), "no run was held on the added node, or no run finished elsewhere"
     assert [r.spec for r in on_ray] == specs
