@@ -18,7 +18,7 @@ from trade_gym.config import SCENE_NAMES, EnvConfig
 from trade_gym.metrics import METRIC_NAMES
 from trade_gym.sim.thermal_crossover import DAY_H, NIGHT_H, TIMES_OF_DAY, morning_crossover
 
-from tests.trade_gym.test_results_doc import load_renderer
+from tests.trade_gym.test_results_doc import render_page_of
 
 ROOT = Path(__file__).resolve().parents[2]
 ALL = ("scripted", "learned", "waypoint", "hover", "random")
@@ -140,10 +140,7 @@ def test_a_tiny_real_flight_run_of_both_perceptions_writes_results_that_reload_a
     flown = {r["run_id"]: r["env_kwargs"] for r in doc["runs"]}
     assert all(r.spec.env_kwargs() == flown[r.spec.run_id] for r in results)  # the hours flown come back
     assert (out / "real_flight_by_time_of_day.png").is_file() and (out / "real_flight_per_world.png").is_file()
-    doc_module = load_renderer()
-    monkeypatch.setattr(doc_module, "RESULTS_DIR", tmp_path)
-    section = next(s for s in doc_module.SECTIONS if s.page == "real_flight")
-    page = doc_module.render_section(section)
-    assert page.startswith(f"# {section.title}") and f"Command: `trade-bench {' '.join(argv)}`" in page
+    title, page = render_page_of(tmp_path, "real_flight", monkeypatch)
+    assert page.startswith(f"# {title}") and f"Command: `trade-bench {' '.join(argv)}`" in page
     assert "| time of day | scene | trade tracked |" in page and "Acceptance (issue 45)" in page
     assert "![real_flight_by_time_of_day.png](real_flight/real_flight_by_time_of_day.png)" in page

@@ -7,13 +7,12 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
 from trade_gym.bench import cli, headlines, runner
 from trade_gym.bench.plots import plot_suite
 from trade_gym.bench.report import render_markdown
 from trade_gym.bench.results import load_results
-from trade_gym.bench.splits import DEVELOPMENT, EVALUATION, TRAINING
+from trade_gym.bench.splits import DEVELOPMENT, EVALUATION
 from trade_gym.bench.suites import SUITE_JOBS, RunSpec, Selection, expand_suite
 from trade_gym.bench.summary import summarise
 from trade_gym.bench.thermal_report import BELOW_GOOD, DECOY_SWITCH, thermal_failure_classes
@@ -21,14 +20,11 @@ from trade_gym.config import SCENE_NAMES, EnvConfig
 from trade_gym.metrics import METRIC_NAMES
 from trade_gym.sim.thermal_crossover import DAY_H, NIGHT_H, TIMES_OF_DAY, morning_crossover
 
-from tests.trade_gym.test_results_doc import load_renderer
+from tests.trade_gym.test_bench_real_flight import ALL, ROOT, SMOKE_PX, SMOKE_STEPS, SMOKE_WORLD
+from tests.trade_gym.test_bench_real_flight import META as REAL_FLIGHT_META
+from tests.trade_gym.test_results_doc import render_page_of
 
-ROOT = Path(__file__).resolve().parents[2]
-ALL = ("scripted", "learned", "waypoint", "hover", "random")
-SMOKE_STEPS, SMOKE_PX = 6, 48  # a tiny run: a few frames at a small camera
-SMOKE_WORLD = TRAINING.first  # tests never fly evaluation worlds; the suite also allows training ones
-META = {"commit": "c", "date_utc": "d", "cpu": "x", "cores": 1, "renderer": "r", "runs": 1, "wall_s": 1.0, "jobs": 1,
-        "suite": "thermal"}
+META = REAL_FLIGHT_META | {"suite": "thermal"}
 
 
 def _configs(runs):
@@ -140,11 +136,8 @@ def test_a_tiny_thermal_run_of_both_stacks_writes_results_that_reload_and_render
     results, _ = load_results(out / "results.json")
     assert [r.spec.group for r in results] == ["thermal", "thermal_light"]
     assert (out / "thermal_by_time_of_day.png").is_file() and (out / "thermal_per_world.png").is_file()
-    doc_module = load_renderer()
-    monkeypatch.setattr(doc_module, "RESULTS_DIR", tmp_path)
-    section = next(s for s in doc_module.SECTIONS if s.page == "thermal")
-    page = doc_module.render_section(section)
-    assert page.startswith(f"# {section.title}") and f"Command: `trade-bench {' '.join(argv)}`" in page
+    title, page = render_page_of(tmp_path, "thermal", monkeypatch)
+    assert page.startswith(f"# {title}") and f"Command: `trade-bench {' '.join(argv)}`" in page
     assert "Acceptance (issue 45), full TRADE" in page and "Acceptance (issue 45), light stack" in page
 
 

@@ -34,6 +34,15 @@ def load_renderer():
     return module
 
 
+def render_page_of(results_dir: Path, page: str, monkeypatch) -> tuple[str, str]:
+    """(title, text) of the per-suite page `page` as scripts/render_results_doc.py renders it from the runs under
+    `results_dir` (a test's own run in place of the committed ones)."""
+    doc = load_renderer()
+    monkeypatch.setattr(doc, "RESULTS_DIR", results_dir)
+    section = next(s for s in doc.SECTIONS if s.page == page)
+    return section.title, doc.render_section(section)
+
+
 def _pages() -> list[Path]:
     """The summary and every committed per-suite page."""
     doc = load_renderer()
