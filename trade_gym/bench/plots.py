@@ -307,8 +307,8 @@ def plot_thermal(results: Sequence[RunResult], path: Path) -> Path | None:
 
 
 def plot_suite(results: Sequence[RunResult], out: Path) -> list[Path]:
-    """The figures across a suite's groups (the breadth suite's success rate by tier and motion, the real-flight
-    suite's tracked fraction by time of day)."""
+    """The figures across a suite's groups (the breadth suite's success rate by tier and motion, the real-flight and
+    thermal suites' tracked fraction by time of day)."""
     figures = (plot_breadth(results, out / "breadth_success.png"),
                plot_real_flight(results, out / "real_flight_by_time_of_day.png"),
                plot_thermal(results, out / "thermal_by_time_of_day.png"))

@@ -67,11 +67,12 @@ TIME_OF_DAY_AXIS = "time_of_day"
 REAL_FLIGHT_TUNING_WORLDS = (TRAINING.first + 210, TRAINING.first + 219)
 # Thermal tracking (issue 45): the unseen suite's full TRADE runs (scripted follower, downward camera, gt pose, the
 # paper's start protocol) on the thermal camera at night, at the scene's morning crossover and by day; then the light
-# stack's ground depth at night and by day in the scenes its gate names. `thermal-tuning` is the same grid on the
-# tuning suite's development worlds (benchmarks/thermal_tracking.py flies those one at a time, with traces).
+# stack's ground depth in the cells issue 45's thermal gates name (night and day, desert and mountain), which the
+# light group flies. `thermal-tuning` is the same grid on the tuning suite's development worlds
+# (benchmarks/thermal_tracking.py flies those one at a time, with traces).
 THERMAL_ENV: Kwargs = (("camera_modality", "thermal"),)
-THERMAL_LIGHT_SCENES = ("desert", "mountain")
-THERMAL_LIGHT_TIMES = ("night", "day")
+THERMAL_GATE_SCENES = ("desert", "mountain")
+THERMAL_GATE_TIMES = ("night", "day")
 
 
 @dataclass(frozen=True)
@@ -323,8 +324,8 @@ def _thermal_groups(steps: int, camera_size: int, worlds: tuple[int, int] = UNSE
                   ("gt",), worlds, steps, camera_size, ((TIME_OF_DAY_AXIS, TIMES_OF_DAY),),
                   UNSEEN_PROTOCOL + THERMAL_ENV),
         GroupSpec("thermal_light", "thermal", "Thermal camera: the light stack's ground depth, scripted follower, gt "
-                  f"pose, at night and by day, one run per {split} world", THERMAL_LIGHT_SCENES, ("scripted",),
-                  ("trade",), ("gt",), worlds, steps, camera_size, ((TIME_OF_DAY_AXIS, THERMAL_LIGHT_TIMES),),
+                  f"pose, at night and by day, one run per {split} world", THERMAL_GATE_SCENES, ("scripted",),
+                  ("trade",), ("gt",), worlds, steps, camera_size, ((TIME_OF_DAY_AXIS, THERMAL_GATE_TIMES),),
                   UNSEEN_PROTOCOL + THERMAL_ENV + (("stack", "light"),)),
     )
 

@@ -15,7 +15,7 @@ from trade_gym.bench.failures import failure_cause
 from trade_gym.bench.real_flight_report import NO_FAILURE, PER_WORLD_SCENE, PER_WORLD_TIME, hours_flown
 from trade_gym.bench.summary import metric_values, pooled_rmse
 from trade_gym.bench.tables import MISSING, fmt, mean_pm, table, with_frames
-from trade_gym.bench.suites import TIME_OF_DAY_AXIS
+from trade_gym.bench.suites import THERMAL_GATE_SCENES, THERMAL_GATE_TIMES, TIME_OF_DAY_AXIS
 from trade_gym.sim.thermal_crossover import TIMES_OF_DAY
 
 if TYPE_CHECKING:
@@ -25,8 +25,7 @@ Record = dict[str, Any]
 # Issue 45's acceptance: "thermal night and day, desert and mountain: full TRADE tracked >= 0.95 with no switch on at
 # least 19 of 20 worlds; light stack ground RMSE (gt pose) <= 1 m pooled; the crossover and the city reported per
 # world (not gated), with the failure classes named"
-GATE_SCENES = ("desert", "mountain")
-GATE_TIMES = ("night", "day")
+GATE_SCENES, GATE_TIMES = THERMAL_GATE_SCENES, THERMAL_GATE_TIMES
 GOOD_TRACKED_FRACTION = 0.95  # a world passes with at least this tracked fraction ...
 GOOD_MAX_SWITCHES = 0  # ... and no more decoy switches
 GATE_GOOD_WORLD_FRACTION = 19 / 20  # a cell passes when at least this fraction of its worlds do
