@@ -12,8 +12,8 @@ from trade_gym.bench.failures import FAIL_GROUND_RMSE_M
 from trade_gym.bench.runner import RunResult
 from trade_gym.bench.summary import metric_stats, metric_values, pooled_rmse, summarise
 from trade_gym.bench.tables import MISSING, fmt, pooled_mean, table
-from trade_gym.bench.thermal_report import good_world
-from trade_gym.sim.thermal_crossover import TIMES_OF_DAY
+from trade_gym.bench.real_flight_report import ordered_times, run_time
+from trade_gym.bench.thermal_report import good_world, run_stack
 
 Record = dict[str, Any]
 # The paper's Table 1, full TRADE: pooled ground-depth RMSE [m] with (ground-truth, VIO) pose per scene.
@@ -142,15 +142,14 @@ def thermal_table(results: Sequence[RunResult]) -> list[str]:
     decoy switch, of the worlds flown, and the mean tracked fraction; then per scene the light stack's ground RMSE
     [m] pooled over its frames."""
     ok = [r for r in results if r.error is None]
-    full = [r for r in ok if r.spec.env_kwargs().get("stack", "full") == "full"]
-    light = [r for r in ok if r.spec.env_kwargs().get("stack") == "light"]
-    present = {r.spec.switch_value("time_of_day") for r in full}
-    times = [t for t in TIMES_OF_DAY if t in present]
+    full = [r for r in ok if run_stack(r) == "full"]
+    light = [r for r in ok if run_stack(r) == "light"]
+    times = ordered_times([run_time(r) for r in full])
     rows = []
     for scene in _unique([r.spec.scene for r in full]):
         row = [scene]
         for time in times:
-            mine = [r for r in full if (r.spec.scene, r.spec.switch_value("time_of_day")) == (scene, time)]
+            mine = [r for r in full if (r.spec.scene, run_time(r)) == (scene, time)]
             tracked = metric_stats(metric_values(mine, "tracked_fraction"))
             row.append(f"{sum(good_world(r.metrics) for r in mine)} of {len(mine)} ({fmt(tracked['mean'], RATE_DIGITS)})"
                        if mine else MISSING)

@@ -16,7 +16,7 @@ import numpy.typing as npt  # noqa: E402
 
 from trade_gym.bench.failures import FAIL_GROUND_RMSE_M, FAIL_TRACKED_FRACTION  # noqa: E402
 from trade_gym.bench.real_flight_report import GATE_TRACKED_FRACTION  # noqa: E402
-from trade_gym.bench.thermal_report import GOOD_TRACKED_FRACTION  # noqa: E402
+from trade_gym.bench.thermal_report import GOOD_TRACKED_FRACTION, run_stack  # noqa: E402
 from trade_gym.bench.runner import RunResult, RunSeries  # noqa: E402
 from trade_gym.bench.suites import TIME_OF_DAY_AXIS, RunSpec  # noqa: E402
 from trade_gym.bench.summary import config_label, metric_values, spec_record  # noqa: E402
@@ -302,7 +302,7 @@ def plot_real_flight(results: Sequence[RunResult], path: Path) -> Path | None:
 def plot_thermal(results: Sequence[RunResult], path: Path) -> Path | None:
     """The thermal suite's tracked fraction by time of day, a bar per stack (full, light); None without its runs."""
     runs = [r for r in results if r.spec.kind == "thermal" and r.error is None]
-    return _plot_by_time_of_day(runs, path, lambda r: f"{r.spec.env_kwargs().get('stack', 'full')} stack",
+    return _plot_by_time_of_day(runs, path, lambda r: f"{run_stack(r)} stack",
                                 GOOD_TRACKED_FRACTION) if runs else None
 
 

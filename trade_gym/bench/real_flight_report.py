@@ -34,16 +34,17 @@ OFF_BAND = "out of the following band"  # no other class, but success failed: th
 NO_FAILURE = "–"
 
 
-def _time(record_or_switches: Mapping[str, Any]) -> str:
+def switches_time(record_or_switches: Mapping[str, Any]) -> str:
+    """The time of day by name in a run's switches (or a summary record's `switches`)."""
     return str(record_or_switches.get(TIME_OF_DAY_AXIS))
 
 
-def _run_time(run: RunResult) -> str:
+def run_time(run: RunResult) -> str:
     """A run's time of day by name (`RunSpec.switch_value` of the named axis)."""
     return str(run.spec.switch_value(TIME_OF_DAY_AXIS))
 
 
-def _ordered_times(values: Sequence[str]) -> list[str]:
+def ordered_times(values: Sequence[str]) -> list[str]:
     present = set(values)
     return [t for t in TIMES_OF_DAY if t in present]
 
@@ -59,11 +60,11 @@ def real_flight_pivot(records: Sequence[Record]) -> list[str]:
     perceptions = list(dict.fromkeys(r["perception"] for r in records))
     scenes = list(dict.fromkeys(r["scene"] for r in records))
     rows = []
-    for time in _ordered_times([_time(r["switches"]) for r in records]):
+    for time in ordered_times([switches_time(r["switches"]) for r in records]):
         for scene in scenes:
             row = [time, scene]
             for perception in perceptions:
-                r = next((r for r in records if (r["scene"], r["perception"], _time(r["switches"])) ==
+                r = next((r for r in records if (r["scene"], r["perception"], switches_time(r["switches"])) ==
                           (scene, perception, time)), None)
                 row += [mean_pm(r["metrics"]["tracked_fraction"], RATE_DIGITS), _rate(r, "success"),
                         _rate(r, "collision_rate")] if r else [MISSING] * 3
@@ -83,7 +84,7 @@ def gate_table(records: Sequence[Record]) -> list[str]:
     whether both hold."""
     rows = []
     for r in records:
-        if r["scene"] in GATE_SCENES and _time(r["switches"]) == GATE_TIME:
+        if r["scene"] in GATE_SCENES and switches_time(r["switches"]) == GATE_TIME:
             tracked, runs = r["metrics"]["tracked_fraction"], r["n_runs"] - r["n_failed"]
             met = tracked["n"] > 0 and tracked["mean"] >= GATE_TRACKED_FRACTION and r["crashes"] == 0 and runs > 0
             rows.append([r["scene"], r["perception"], fmt(tracked["mean"], RATE_DIGITS),
@@ -120,9 +121,9 @@ def _per_world(run: RunResult | None) -> list[str]:
 
 def hours_flown(runs: Sequence[RunResult]) -> list[str]:
     """'Hours flown [h, solar time]: ' per scene, each time of day's hour."""
-    hours = {(r.spec.scene, _run_time(r)): r.spec.env_kwargs()[HOUR_KEY] for r in runs}
+    hours = {(r.spec.scene, run_time(r)): r.spec.env_kwargs()[HOUR_KEY] for r in runs}
     scenes = list(dict.fromkeys(r.spec.scene for r in runs))
-    times = _ordered_times([t for _, t in hours])
+    times = ordered_times([t for _, t in hours])
     return ["Hours flown [h, solar time]: " + "; ".join(
         f"{scene} " + ", ".join(f"{t} {hours[scene, t]:g}" for t in times if (scene, t) in hours) for scene in scenes)
         + " (the crossover: `trade_gym.sim.thermal_crossover.morning_crossover`).", ""]
@@ -133,12 +134,12 @@ def real_flight_worlds(runs: Sequence[RunResult]) -> list[str]:
     the city, and a row per world of those (tracked fraction, success, failure classes per perception)."""
     lines = hours_flown(runs)
     perceptions = list(dict.fromkeys(r.spec.perception for r in runs))
-    shown = [r for r in runs if _run_time(r) == PER_WORLD_TIME or r.spec.scene == PER_WORLD_SCENE]
-    cells = list(dict.fromkeys((r.spec.scene, _run_time(r)) for r in shown))
-    by_key = {(r.spec.scene, _run_time(r), r.spec.perception, r.spec.seed): r for r in shown}
+    shown = [r for r in runs if run_time(r) == PER_WORLD_TIME or r.spec.scene == PER_WORLD_SCENE]
+    cells = list(dict.fromkeys((r.spec.scene, run_time(r)) for r in shown))
+    by_key = {(r.spec.scene, run_time(r), r.spec.perception, r.spec.seed): r for r in shown}
     counts, worlds = [], []
     for scene, time in cells:
-        mine = [r for r in shown if (r.spec.scene, _run_time(r)) == (scene, time)]
+        mine = [r for r in shown if (r.spec.scene, run_time(r)) == (scene, time)]
         row = [scene, time]
         for perception in perceptions:
             classes = Counter(c for r in mine if r.spec.perception == perception

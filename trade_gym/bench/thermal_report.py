@@ -12,11 +12,11 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from trade_gym.bench.failures import failure_cause
-from trade_gym.bench.real_flight_report import NO_FAILURE, PER_WORLD_SCENE, PER_WORLD_TIME, hours_flown
+from trade_gym.bench.real_flight_report import (NO_FAILURE, PER_WORLD_SCENE, PER_WORLD_TIME, hours_flown,
+                                                ordered_times, run_time, switches_time)
 from trade_gym.bench.summary import metric_values, pooled_rmse
 from trade_gym.bench.tables import MISSING, fmt, mean_pm, table, with_frames
-from trade_gym.bench.suites import THERMAL_GATE_SCENES, THERMAL_GATE_TIMES, TIME_OF_DAY_AXIS
-from trade_gym.sim.thermal_crossover import TIMES_OF_DAY
+from trade_gym.bench.suites import THERMAL_GATE_SCENES, THERMAL_GATE_TIMES
 
 if TYPE_CHECKING:
     from trade_gym.bench.runner import RunResult
@@ -35,17 +35,9 @@ BELOW_GOOD = f"tracked < {GOOD_TRACKED_FRACTION:g}"
 DECOY_SWITCH = "switched to a decoy"
 
 
-def _time(run: RunResult) -> str:
-    return str(run.spec.switch_value(TIME_OF_DAY_AXIS))
-
-
-def _stack(run: RunResult) -> str:
+def run_stack(run: RunResult) -> str:
+    """The TRADE preset a run flew (`stack`; "full" when its env took the default)."""
     return str(run.spec.env_kwargs().get("stack", "full"))
-
-
-def _ordered_times(values: Sequence[str]) -> list[str]:
-    present = set(values)
-    return [t for t in TIMES_OF_DAY if t in present]
 
 
 def good_world(metrics: Mapping[str, Any]) -> bool:
@@ -73,8 +65,8 @@ def thermal_pivot(records: Sequence[Record]) -> list[str]:
     """Rows time of day x scene: tracked fraction (mean ± std, worst world), decoy switches (total) and ground-depth
     RMSE pooled over every frame of every world."""
     rows = []
-    for time in _ordered_times([str(r["switches"].get(TIME_OF_DAY_AXIS)) for r in records]):
-        for r in (r for r in records if str(r["switches"].get(TIME_OF_DAY_AXIS)) == time):
+    for time in ordered_times([switches_time(r["switches"]) for r in records]):
+        for r in (r for r in records if switches_time(r["switches"]) == time):
             tracked = r["metrics"]["tracked_fraction"]
             rows.append([time, r["scene"], mean_pm(tracked, RATE_DIGITS),
                          fmt(tracked["min"], RATE_DIGITS) if tracked["n"] else MISSING,
@@ -91,14 +83,14 @@ def thermal_pivot(records: Sequence[Record]) -> list[str]:
 def gate_tables(runs: Sequence[RunResult]) -> list[str]:
     """Issue 45's gates on the gated cells present: full TRADE's good worlds per cell; the light stack's ground RMSE
     per cell and pooled over them."""
-    gated = [r for r in runs if r.error is None and r.spec.scene in GATE_SCENES and _time(r) in GATE_TIMES]
+    gated = [r for r in runs if r.error is None and r.spec.scene in GATE_SCENES and run_time(r) in GATE_TIMES]
     lines = []
-    full = [r for r in gated if _stack(r) == "full"]
+    full = [r for r in gated if run_stack(r) == "full"]
     if full:
         rows = []
         for scene in GATE_SCENES:
             for time in GATE_TIMES:
-                mine = [r for r in full if (r.spec.scene, _time(r)) == (scene, time)]
+                mine = [r for r in full if (r.spec.scene, run_time(r)) == (scene, time)]
                 if mine:
                     good = sum(good_world(r.metrics) for r in mine)
                     met = good >= GATE_GOOD_WORLD_FRACTION * len(mine)
@@ -106,7 +98,7 @@ def gate_tables(runs: Sequence[RunResult]) -> list[str]:
         lines += [f"Acceptance (issue 45), full TRADE: tracked >= {GOOD_TRACKED_FRACTION:g} with no decoy switch on at "
                   f"least {GATE_GOOD_WORLD_FRACTION:.0%} of the worlds (19 of 20) of each cell.", ""]
         lines += table(["scene", "time of day", "worlds tracked >= 0.95, no switch", "gate"], rows) + [""]
-    light = [r for r in gated if _stack(r) == "light"]
+    light = [r for r in gated if run_stack(r) == "light"]
     if light:
         rmse = pooled_rmse(metric_values(light, "ground_depth_rmse_m"), metric_values(light, "ground_depth_frames"))
         met = math.isfinite(rmse) and rmse <= GATE_LIGHT_GROUND_RMSE_M
@@ -119,7 +111,7 @@ def gate_tables(runs: Sequence[RunResult]) -> list[str]:
 def _world_row(run: RunResult) -> list[str]:
     m = run.metrics
     tracked, switches, rmse = (m.get(k) for k in ("tracked_fraction", "decoy_switches", "ground_depth_rmse_m"))
-    return [run.spec.scene, _time(run), str(run.spec.seed),
+    return [run.spec.scene, run_time(run), str(run.spec.seed),
             MISSING if tracked is None else fmt(float(tracked), RATE_DIGITS),
             MISSING if switches is None else str(int(switches)), MISSING if rmse is None else fmt(float(rmse)),
             "; ".join(thermal_failure_classes(m, run.error)) or NO_FAILURE]
@@ -129,13 +121,13 @@ def thermal_worlds(runs: Sequence[RunResult]) -> list[str]:
     """The gates, the hours flown, the failure classes counted per cell of the crossover, the city and the gated
     cells, and a row per world for the crossover, the city and every world that misses the bar."""
     lines = gate_tables(runs) + hours_flown(runs)
-    shown = [r for r in runs if _time(r) == PER_WORLD_TIME or r.spec.scene == PER_WORLD_SCENE
+    shown = [r for r in runs if run_time(r) == PER_WORLD_TIME or r.spec.scene == PER_WORLD_SCENE
              or thermal_failure_classes(r.metrics, r.error)]
     if not shown:
         return lines
     counts = []
-    for scene, time in dict.fromkeys((r.spec.scene, _time(r)) for r in shown):
-        classes = Counter(c for r in runs if (r.spec.scene, _time(r)) == (scene, time)
+    for scene, time in dict.fromkeys((r.spec.scene, run_time(r)) for r in shown):
+        classes = Counter(c for r in runs if (r.spec.scene, run_time(r)) == (scene, time)
                           for c in thermal_failure_classes(r.metrics, r.error))
         counts.append([scene, time, ", ".join(f"{c} {n}" for c, n in classes.most_common()) or NO_FAILURE])
     lines += [f"Failure classes per cell: the {PER_WORLD_TIME} in every scene, the {PER_WORLD_SCENE} at every time "
