@@ -163,10 +163,10 @@ def thermal_table(results: Sequence[RunResult]) -> list[str]:
 def speed_table(records: Sequence[Mapping[str, Any]]) -> list[str]:
     """One row per `benchmarks/speed.py` record: env steps/s without rendering (oracle perception), with rendering at
     256 px and with full TRADE at 256 px (the real-time target is the camera's 30 Hz; `–` in a record made before
-    speed.py measured it), with the record's commit, date and machine."""
+    speed.py measured it), with the record's date and machine (its commit is in the record)."""
     rows = [[r["scene"], f"{r['oracle_steps_per_s']:g}", f"{r['rendering_steps_per_s_256']:g}",
-             f"{r['trade_steps_per_s_256']:g}" if "trade_steps_per_s_256" in r else MISSING, f"`{r['meta']['commit']}`",
+             f"{r['trade_steps_per_s_256']:g}" if "trade_steps_per_s_256" in r else MISSING,
              r["meta"]["date"][:len("YYYY-MM-DD")], f"{r['meta']['cpu']} ({r['meta']['cores']} cores)"]
             for r in records]
-    return table(["scene", "oracle steps/s", "rendering steps/s (256 px)", "full TRADE steps/s (256 px)", "commit",
-                  "date", "machine"], rows)
+    return table(["scene", "oracle steps/s", "rendering steps/s (256 px)", "full TRADE steps/s (256 px)", "date",
+                  "machine"], rows)
