@@ -36,6 +36,17 @@ def draw_vehicle(image: np.ndarray, centre_px: np.ndarray, body_level: float | N
     return np.array([x0 - 0.5, y0 - 0.5, x1 - x0, y1 - y0], dtype=np.float64)
 
 
+def draw_turned_vehicle(image: np.ndarray, centre_px: np.ndarray, heading_deg: float) -> np.ndarray:
+    """Draw the vehicle's body (no engine cover) turned by `heading_deg` from the image's y axis, centred at
+    `centre_px` (x, y), into the float grey `image`; its axis-aligned box (x, y, w, h) [px] and pixel count."""
+    corners = cv2.boxPoints(((float(centre_px[0]), float(centre_px[1])), tuple(VEHICLE_WH_PX), heading_deg))
+    mask = np.zeros(image.shape, np.uint8)
+    cv2.fillConvexPoly(mask, np.round(corners).astype(np.int32), 1)
+    image[mask > 0] = BODY_LEVEL
+    ys, xs = np.nonzero(mask)
+    return np.array([xs.min() - 0.5, ys.min() - 0.5, xs.max() - xs.min() + 1, ys.max() - ys.min() + 1, xs.size])
+
+
 def picture(scene: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """The camera's (h, w, 3) uint8 grey image of the float grey `scene`: blurred, noisy, one channel in all three."""
     grey = cv2.GaussianBlur(scene.astype(np.float32), (0, 0), BLUR_PX)

@@ -7,6 +7,7 @@ On a grey image (a thermal camera's) the histograms are over grey levels (`trade
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import cast
 
@@ -48,7 +49,12 @@ class ColourBoxConfig:
     closing_radius_px: int = 1  # morphological closing of the foreground (bridges gaps <= 2 r px)
     opening_radius_px: int = 1  # lines <= 2 r px wide are cut off the blob (see _without_lines)
     max_centre_gap_px: float = 4.0  # no blob within this distance of the centre -> no refinement
-    min_area_ratio: float = 0.4  # refined box area / previous box area must lie in [min, max]
+    # refined box area / previous box area must lie in [min, max]. On a grey image the ratio is to the smaller of the
+    # previous box and the tracker's box (`refine`'s size_reference) when that is given: grey levels alone let the
+    # blob merge with warm ground it touches, and a chain of merged blobs, each within the ratio of the last output
+    # box, walked that box to 3.5 times the vehicle, whose own blob it then refused (desert by day), while the
+    # tracker's box, bounded by one scale step a frame, kept the vehicle's size.
+    min_area_ratio: float = 0.4
     max_area_ratio: float = 2.5
     # blob pixels / area of the tracker's (scale-tracked) box must not exceed this: one vehicle fills
     # about 0.8-1 of its box in any orientation, two identical vehicles side by side about twice that
@@ -64,11 +70,15 @@ class ColourBoxConfig:
     # docs/perception.md "Thermal images").
     grey_bins: int = 128
     grey_histogram_blur_passes: int = 2  # binomial smoothing passes along the grey axis
-    # On a grey image a blob must fill at least this share of the tracker's box (blob pixels / its area): a driving
-    # vehicle's engine cover and exhaust are far hotter than its body, and their blob alone (a third of the vehicle)
-    # is the likeliest one; taken, it shrank the box onto them (night mountain). A whole vehicle fills 0.8-1 of its
-    # box, a turning one less.
+    # On a grey image a driving vehicle's engine cover and exhaust are far hotter than its body, and their blob alone
+    # (a third of the vehicle) is the likeliest one; taken, it shrank the box onto them (night mountain). So a grey
+    # blob must fill at least grey_min_blob_fill_ratio of the tracker's box (blob pixels / its area), or else its
+    # tight box must span at least grey_min_blob_span_ratio of the tracker's box (by area). A whole vehicle fills
+    # 0.8-1 of a box learnt on it, but a turning one fills less of its axis-aligned box (2a / (1 + a)^2 = 0.40 at 45
+    # deg for an a = 2.6 car), which the tracker's box follows (`GuidedTrackerConfig.dcf_size_from_blob`): its tight
+    # box still spans the tracker's (0.96-1.09, desert by day). The engine alone spans 0.35-0.5 of it.
     grey_min_blob_fill_ratio: float = 0.45
+    grey_min_blob_span_ratio: float = 0.7
 
     def __post_init__(self) -> None:
         counts = ("bins_per_channel", "histogram_blur_passes", "min_window_px", "closing_radius_px",
@@ -90,6 +100,7 @@ class ColourBoxConfig:
             "max_centre_gap_px": self.max_centre_gap_px >= 0,
             "min_area_ratio": 0.0 < self.min_area_ratio <= 1.0,
             "max_area_ratio": self.max_area_ratio >= 1.0,
+            "grey_min_blob_span_ratio": 0.0 <= self.grey_min_blob_span_ratio <= self.max_area_ratio,
             "max_blob_fill_ratio": self.max_blob_fill_ratio > 0.0,
             "max_border_sides": checks["max_border_sides"] and self.max_border_sides <= 4,
             "min_contrast": 0.0 <= self.min_contrast < 1.0,
@@ -346,15 +357,20 @@ class ColourBoxRefiner:
             + (c1 == w - 1 and origin[0] + w < image_hw[1])
             + (r1 == h - 1 and origin[1] + h < image_hw[0])
         )
-        area_ratio = box.w_px * box.h_px / (previous.w_px * previous.h_px)
+        area = box.w_px * box.h_px
+        grey_reference = size_reference if self._bins.grey else None
+        reference_area = math.inf if grey_reference is None else grey_reference.w_px * grey_reference.h_px
+        area_ratio = area / min(previous.w_px * previous.h_px, reference_area)
+        span = area / reference_area  # of the tracker's box, on a grey image
         fill = area_px / (size_reference.w_px * size_reference.h_px) if size_reference is not None else 0.0
         rejection = ""
         if not cfg.min_area_ratio <= area_ratio <= cfg.max_area_ratio:
             rejection = f"area ratio {area_ratio:.2f} outside [{cfg.min_area_ratio}, {cfg.max_area_ratio}]"
         elif fill > cfg.max_blob_fill_ratio:
             rejection = f"blob fills {fill:.2f} > {cfg.max_blob_fill_ratio} of the tracker's box"
-        elif self._bins.grey and size_reference is not None and fill < cfg.grey_min_blob_fill_ratio:
-            rejection = f"grey blob fills {fill:.2f} < {cfg.grey_min_blob_fill_ratio} of the tracker's box"
+        elif grey_reference is not None and fill < cfg.grey_min_blob_fill_ratio and span < cfg.grey_min_blob_span_ratio:
+            rejection = (f"grey blob fills {fill:.2f} < {cfg.grey_min_blob_fill_ratio} of the tracker's box and spans "
+                         f"{span:.2f} < {cfg.grey_min_blob_span_ratio} of it")
         elif touches > cfg.max_border_sides:
             rejection = f"blob touches {touches} window sides"
         elif contrast <= cfg.min_contrast:

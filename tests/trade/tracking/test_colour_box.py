@@ -250,7 +250,8 @@ def test_refine_before_init_raises() -> None:
 @pytest.mark.parametrize(
     ("field", "value"),
     [("bins_per_channel", 1), ("surround_factor", 1.0), ("min_threshold", 0.0), ("learning_rate", 1.5),
-     ("max_area_ratio", 0.5), ("prior_density", 0.0), ("box_rim_px", -1)],
+     ("max_area_ratio", 0.5), ("prior_density", 0.0), ("box_rim_px", -1), ("grey_min_blob_span_ratio", -0.1),
+     ("grey_min_blob_fill_ratio", 2.0)],
 )
 def test_config_invalid_field_raises_naming_it(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):

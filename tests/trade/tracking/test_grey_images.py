@@ -15,7 +15,7 @@ from trade.types import BBox, PixelPrediction, iou
 
 from tests.trade import car_scene
 from tests.trade.thermal_scene import (
-    BODY_LEVEL, ENGINE_SHARE, IMAGE_PX, VEHICLE_WH_PX, cold_ground, draw_vehicle, picture,
+    BODY_LEVEL, ENGINE_SHARE, IMAGE_PX, VEHICLE_WH_PX, cold_ground, draw_turned_vehicle, draw_vehicle, picture,
 )
 
 START_PX = np.array([40.0, 70.0])
@@ -80,23 +80,65 @@ def test_refine_a_warm_vehicle_with_a_hot_engine_boxes_the_whole_vehicle(seed):
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_refine_the_hot_engine_alone_is_refused_against_the_trackers_box(seed):
-    """A body no warmer than the ground under it leaves only the engine cover (a third of the vehicle) as a blob: at
-    the engine, with a last output box of its size, refused as too small for the tracker's box (the vehicle's), and
-    accepted without the grey fill test."""
+    """A body no warmer than the ground under it leaves only the engine cover (a third of the vehicle) as a blob. At
+    the engine, with a last output box of its size and the vehicle's box as the tracker's: refused as filling too
+    little of the tracker's box and spanning too little of it; accepted without the fill test."""
     rng = np.random.default_rng(seed)
-    ground = cold_ground(seed)
-    image, gt = _frame(ground, START_PX, rng, body_level=None)
+    image, gt = _frame(cold_ground(seed), START_PX, rng, body_level=None)
     engine_box = BBox(gt[0], gt[1], gt[2], ENGINE_SHARE * gt[3])  # the last output box, as if sized on the engine
-    engine_px = engine_box.center
-    results = []
+    verdicts = []
     for min_fill in (ColourBoxConfig().grey_min_blob_fill_ratio, 0.0):
         refiner = ColourBoxRefiner(ColourBoxConfig(grey_min_blob_fill_ratio=min_fill))
         refiner.init(image, BBox.from_array(gt))
-        results.append(refiner.refine(image, engine_px, engine_box,
-                                      size_reference=BBox.from_array(gt)))
-    with_test, without = results
-    assert with_test is not None and not with_test.accepted and with_test.rejection.startswith("grey blob fills")
+        verdicts.append(refiner.refine(image, engine_box.center, engine_box, size_reference=BBox.from_array(gt)))
+    with_test, without = verdicts
+    assert with_test is not None and with_test.rejection.startswith("grey blob fills"), with_test
     assert without is not None and without.accepted and without.area_px < 0.45 * VEHICLE_WH_PX.prod()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_refine_a_vehicle_turned_45_degrees_is_accepted_by_its_span_of_the_trackers_box(seed):
+    """The vehicle turned 45 deg fills about 0.4 of its axis-aligned box, which the tracker's box follows: its blob
+    fills less than grey_min_blob_fill_ratio of the tracker's box but spans it, and is accepted; refused when the span
+    asked for is more than the whole box."""
+    rng = np.random.default_rng(seed)
+    scene = cold_ground(seed)[:IMAGE_PX, :IMAGE_PX].copy()
+    *turned, vehicle_px = draw_turned_vehicle(scene, START_PX, 45.0)
+    image, turned_box = picture(scene, rng), BBox(*turned)
+    assert vehicle_px / (turned_box.w_px * turned_box.h_px) < ColourBoxConfig().grey_min_blob_fill_ratio
+    verdicts = []
+    for span in (ColourBoxConfig().grey_min_blob_span_ratio, ColourBoxConfig().max_area_ratio):
+        refiner = ColourBoxRefiner(ColourBoxConfig(grey_min_blob_span_ratio=span))
+        refiner.init(image, turned_box)
+        verdicts.append(refiner.refine(image, START_PX, turned_box, size_reference=turned_box))
+    spanning, too_wide_a_span = verdicts
+    assert spanning is not None and spanning.accepted, spanning
+    assert iou(spanning.box.as_array(), turned_box.as_array()) > 0.7
+    assert too_wide_a_span is not None and too_wide_a_span.rejection.startswith("grey blob fills"), too_wide_a_span
+
+
+def test_refine_a_grey_blob_is_sized_against_the_smaller_of_the_output_box_and_the_trackers_box():
+    """Grey: the vehicle's blob is accepted though the last output box had grown to 3.5 times it (the tracker's box is
+    the vehicle's); a blob merged with a warm strip beside it, 3 times the vehicle, is refused though it is within
+    max_area_ratio of that output box, and refused against the vehicle's output box though within it of a tracker's
+    box grown to 1.4 times the vehicle."""
+    rng = np.random.default_rng(4)
+    scene = cold_ground(4)[:IMAGE_PX, :IMAGE_PX].copy()
+    gt = BBox.from_array(draw_vehicle(scene, START_PX))
+
+    def grown(factor: float) -> BBox:
+        return BBox.from_center(*gt.center, factor**0.5 * gt.w_px, factor**0.5 * gt.h_px)
+
+    refiner = ColourBoxRefiner()
+    refiner.init(picture(scene, rng), gt)
+    ref = refiner.refine(picture(scene, rng), gt.center, grown(3.5), size_reference=gt)
+    assert ref is not None and ref.accepted and iou(ref.box.as_array(), gt.as_array()) > 0.8, ref
+    x0, y0 = round(gt.x_px + gt.w_px + 0.5), round(gt.y_px + 0.5)
+    scene[y0 : y0 + 4, x0 : x0 + 24] = BODY_LEVEL  # a warm strip off the vehicle's side (a sunlit wall)
+    merged = picture(scene, rng)
+    for previous, tracker in ((grown(3.5), gt), (gt, grown(1.4))):
+        ref = refiner.refine(merged, gt.center, previous, size_reference=tracker)
+        assert ref is not None and ref.rejection.startswith("area ratio") and ref.box.w_px > 2 * gt.w_px, ref
 
 
 ROCK_OFFSET_LEVELS = (7.0, 10.0)  # warm rocks' grey levels off the body's, either way
