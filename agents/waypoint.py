@@ -17,7 +17,7 @@ from trade.camera_pitch import NADIR_PITCH_DEG
 from trade.validation import is_finite_number, is_positive_number, require
 from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, DEFAULT_WAYPOINT_SCALE
 from trade_gym.agents.scripted import target_inputs
-from trade_gym.config import CAMERA_FOV_RANGE_DEG, CAMERA_PITCH_RANGE_DEG, EnvConfig
+from trade_gym.config import CAMERA_FOV_RANGE_DEG, CAMERA_PITCH_RANGE_DEG, CAMERA_RATE_HZ, EnvConfig
 from trade_gym.sim.quadrotor import QuadrotorConfig
 
 WAYPOINT_MODE = "waypoint"  # the env's action_mode this follower flies
@@ -44,6 +44,13 @@ class WaypointFollowerConfig:
     the drone fell behind a 3 m/s target (real-flight-tuning, desert 10212: 16 -> 30 m in 6 s). There the box's ray
     is followed to flat ground from the servo height image_offset_m / tan(fov / 2), the height at which that ground
     point mapping equals the linear servo for a downward camera (`_servo_image`).
+    `handover_s`: from a track's first 3D estimate the offset blends linearly from the image servo's to the 3D one
+    over this time (with a box to servo on; without one the 3D offset alone). The two differ at the hand-over: the
+    filter's first velocities are unconverged (desert 10216 by day: 13.7 m/s for a 3 m/s target two updates after
+    the first fix), and a step to the led waypoint saturated it, the drone pitched into it and the camera swung the
+    target out of the tracker's window; a step to the unled one braked a drone the servo had flying forward (10217).
+    2 s is 1 / k_p, the position loop's time constant (`lead_time_s`'s); 0 switches at once.
+    `frame_dt_s`: the env's frame period [s], the time between two `predict` calls of one episode.
     """
 
     camera_pitch_deg: float = EnvConfig.camera_pitch_deg  # must match the env's
@@ -52,13 +59,16 @@ class WaypointFollowerConfig:
     image_offset_m: float = 12.0
     # the env's waypoint scale (`env.waypoint_scale`) [m per unit action]
     max_offset_horizontal_m: float = DEFAULT_WAYPOINT_SCALE.max_offset_horizontal_m
+    handover_s: float = 1.0 / QuadrotorConfig.position_gain_horizontal_per_s
+    frame_dt_s: float = 1.0 / CAMERA_RATE_HZ
 
     def __post_init__(self) -> None:
         c = "WaypointFollowerConfig"
-        for name in ("image_offset_m", "max_offset_horizontal_m"):
+        for name in ("image_offset_m", "max_offset_horizontal_m", "frame_dt_s"):
             require(is_positive_number(getattr(self, name)), f"{c}.{name}", getattr(self, name), "a finite number > 0")
-        require(is_finite_number(self.lead_time_s) and self.lead_time_s >= 0.0, f"{c}.lead_time_s", self.lead_time_s,
-                "a finite number >= 0 [s]")
+        for name in ("lead_time_s", "handover_s"):
+            require(is_finite_number(getattr(self, name)) and getattr(self, name) >= 0.0, f"{c}.{name}",
+                    getattr(self, name), "a finite number >= 0 [s]")
         low, high = CAMERA_FOV_RANGE_DEG
         require(is_finite_number(self.camera_fov_deg) and low <= self.camera_fov_deg <= high,
                 f"{c}.camera_fov_deg", self.camera_fov_deg, f"in [{low}, {high}] (the env's range)")
@@ -73,9 +83,10 @@ class WaypointFollowerConfig:
         if config.action_mode != WAYPOINT_MODE:
             raise ValueError(f"WaypointFollower sends position setpoints and needs an env with "
                              f"action_mode={WAYPOINT_MODE!r}, got action_mode={config.action_mode!r}")
+        time_constant_s = 1.0 / config.quadrotor.position_gain_horizontal_per_s
         return cls(camera_pitch_deg=config.camera_pitch_deg, camera_fov_deg=config.camera_fov_deg,
-                   lead_time_s=1.0 / config.quadrotor.position_gain_horizontal_per_s,
-                   max_offset_horizontal_m=config.waypoint_scale.max_offset_horizontal_m)
+                   lead_time_s=time_constant_s, max_offset_horizontal_m=config.waypoint_scale.max_offset_horizontal_m,
+                   handover_s=time_constant_s, frame_dt_s=config.frame_dt_s)
 
 
 class WaypointFollower:
@@ -85,12 +96,15 @@ class WaypointFollower:
 
     With a 3D estimate (`target_pos_rel_m` not zero) the offset is rel + lead_time v - (h / tan(pitch), 0), h = -rel_z
     the height above the target. Before one, it servos the box towards the image centre (`image_offset_m`); with no
-    box either, it holds position (a zero action). On a velocity-mode env these actions would be read as velocities:
-    build it with `WaypointFollower.for_env(env)`, which refuses one.
+    box either, it holds position (a zero action). From the servo to the 3D offset it hands over in `handover_s`,
+    per env of a batch: `episode_start` True (and every env on the first call, after `reset()` or when the batch size
+    changes) starts an episode without a 3D estimate. On a velocity-mode env these actions would be read as
+    velocities: build it with `WaypointFollower.for_env(env)`, which refuses one.
     """
 
     def __init__(self, config: WaypointFollowerConfig | None = None) -> None:
         self.config = config or WaypointFollowerConfig()
+        self._weight_3d: np.ndarray | None = None  # (N,) per env the 3D offset's weight in [0, 1] (`handover_s`)
 
     @classmethod
     def for_env(cls, env: gym.Env) -> WaypointFollower:
@@ -101,7 +115,8 @@ class WaypointFollower:
         return cls(WaypointFollowerConfig.of(config))
 
     def reset(self) -> None:
-        """Nothing to reset: every action depends on its observation alone (kept for the followers' common API)."""
+        """Forget the hand-overs: the next call starts new episodes."""
+        self._weight_3d = None
 
     def predict(
         self,
@@ -111,11 +126,34 @@ class WaypointFollower:
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
         rel, vel, bbox, batched = target_inputs(observation)
-        offsets = np.stack([self._centre_on_target(r, v) if np.any(r != 0.0) else self._servo_image(b)
-                            for r, v, b in zip(rel, vel, bbox)])
+        weights = self._handover_weights(np.any(rel != 0.0, axis=1), episode_start)
+        offsets = np.stack([self._offset(r, v, b, w) for r, v, b, w in zip(rel, vel, bbox, weights)])
         action = np.zeros((len(rel), ACTION_DIM), np.float32)  # up and yaw stay 0: keep altitude and yaw
         action[:, :2] = self._scaled(offsets)
         return (action if batched else action[0]), state
+
+    def _handover_weights(self, known: np.ndarray, episode_start: np.ndarray | None) -> np.ndarray:
+        """(N,) the 3D offset's weight this frame per env: 0 without a 3D estimate, else one frame of `handover_s`
+        more than on the last frame, at most 1 (1 at once for `handover_s` 0)."""
+        weights = self._weight_3d
+        if weights is None or len(weights) != len(known):
+            weights = np.zeros(len(known))
+        elif episode_start is not None:
+            weights = np.where(np.asarray(episode_start, dtype=bool).reshape(-1), 0.0, weights)
+        cfg = self.config
+        step = 1.0 if cfg.handover_s == 0.0 else cfg.frame_dt_s / cfg.handover_s
+        self._weight_3d = np.where(known, np.minimum(weights + step, 1.0), 0.0)
+        return self._weight_3d
+
+    def _offset(self, rel: np.ndarray, vel: np.ndarray, bbox_norm: np.ndarray, weight_3d: float) -> np.ndarray:
+        """(forward, left) [m]: the 3D offset with `weight_3d`, the box servo's with the rest (the 3D one alone
+        without a box; the servo's alone without a 3D estimate)."""
+        if weight_3d == 0.0:
+            return self._servo_image(bbox_norm)
+        centred = self._centre_on_target(rel, vel)
+        if weight_3d == 1.0 or not np.any(bbox_norm):
+            return centred
+        return weight_3d * centred + (1.0 - weight_3d) * self._servo_image(bbox_norm)
 
     def _centre_on_target(self, rel: np.ndarray, vel: np.ndarray) -> np.ndarray:
         """(forward, left) [m]: to where the optical axis meets the target predicted `lead_time_s` ahead."""

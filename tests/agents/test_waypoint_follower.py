@@ -49,6 +49,7 @@ def test_config_of_an_env_takes_its_pitch_scale_and_position_gain():
                        quadrotor={"position_gain_horizontal_per_s": 0.25})
     follower = WaypointFollowerConfig.of(config)
     assert (follower.camera_pitch_deg, follower.max_offset_horizontal_m, follower.lead_time_s) == (45.0, 10.0, 4.0)
+    assert (follower.handover_s, follower.frame_dt_s) == (4.0, config.frame_dt_s)
     assert WaypointFollowerConfig.of(EnvConfig(action_mode="waypoint")) == WaypointFollowerConfig()
 
 
@@ -117,8 +118,58 @@ def test_batch_and_single_observations_agree():
         np.testing.assert_array_equal(row, follower.predict(observation)[0])
 
 
+HANDOVER = WaypointFollowerConfig(handover_s=0.5, frame_dt_s=0.1, lead_time_s=0.0, max_offset_horizontal_m=100.0)
+BOX = (0.8, 0.3, 0.05, 0.1)  # right of and above the centre
+REL = (5.0, 2.0, -16.0)  # the downward camera's 3D offset is (5, 2) m
+
+
+def _offsets(follower: WaypointFollower, *observations: dict[str, np.ndarray], start: bool = False) -> list[np.ndarray]:
+    """The (forward, left) offsets [m] the follower asks for on consecutive frames (the first one starting an
+    episode when `start`)."""
+    return [follower.predict(o, episode_start=np.array([start and k == 0]))[0][:2] * 100.0
+            for k, o in enumerate(observations)]
+
+
+def test_the_hand_over_blends_the_servo_offset_into_the_3d_one_over_handover_s():
+    """A box, then a 3D estimate with it: the offset moves from the servo's to the 3D one in handover_s / frame_dt_s
+    = 5 frames; losing the 3D estimate, or a new episode, hands over again."""
+    follower = WaypointFollower(HANDOVER)
+    servo, *blended = _offsets(follower, _obs(bbox=BOX), *[_obs(rel=REL, bbox=BOX)] * 6)
+    np.testing.assert_allclose(servo, [HANDOVER.image_offset_m * 0.4, -HANDOVER.image_offset_m * 0.6], rtol=1e-6)
+    for k, offset in enumerate(blended, start=1):
+        weight = min(k / 5, 1.0)
+        np.testing.assert_allclose(offset, weight * np.array(REL[:2]) + (1 - weight) * servo, rtol=1e-5, atol=1e-5)
+    lost, again = _offsets(follower, _obs(bbox=BOX), _obs(rel=REL, bbox=BOX))
+    np.testing.assert_allclose([lost, again], [servo, 0.2 * np.array(REL[:2]) + 0.8 * servo], rtol=1e-5)
+    (restarted,) = _offsets(follower, _obs(rel=REL, bbox=BOX), start=True)
+    np.testing.assert_allclose(restarted, again, rtol=1e-5)
+
+
+def test_the_hand_over_takes_the_3d_offset_alone_without_a_box_and_at_once_with_handover_s_0():
+    follower = WaypointFollower(HANDOVER)
+    np.testing.assert_allclose(_offsets(follower, _obs(rel=REL))[0], REL[:2], rtol=1e-6)
+    at_once = WaypointFollower(WaypointFollowerConfig(handover_s=0.0, lead_time_s=0.0, max_offset_horizontal_m=100.0))
+    np.testing.assert_allclose(_offsets(at_once, _obs(bbox=BOX), _obs(rel=REL, bbox=BOX))[1], REL[:2], rtol=1e-6)
+
+
+def test_the_hand_over_is_per_env_in_a_batch():
+    """Two envs three frames into a hand-over; the first starts a new episode: its weight restarts, the other's
+    goes on."""
+    follower, pair = WaypointFollower(HANDOVER), {k: np.stack([v, v]) for k, v in _obs(rel=REL, bbox=BOX).items()}
+    for _ in range(3):
+        follower.predict(pair, episode_start=np.array([False, False]))
+    action, _ = follower.predict(pair, episode_start=np.array([True, False]))
+    single = WaypointFollower(HANDOVER)
+    first, _ = single.predict(_obs(rel=REL, bbox=BOX))
+    np.testing.assert_allclose(action[0], first, rtol=1e-6)
+    for _ in range(3):
+        fourth, _ = single.predict(_obs(rel=REL, bbox=BOX))
+    np.testing.assert_allclose(action[1], fourth, rtol=1e-6)
+
+
 @pytest.mark.parametrize("bad", [{"lead_time_s": -1.0}, {"image_offset_m": 0.0}, {"camera_pitch_deg": 10.0},
-                                 {"max_offset_horizontal_m": math.nan}, {"camera_fov_deg": 200.0}])
+                                 {"max_offset_horizontal_m": math.nan}, {"camera_fov_deg": 200.0},
+                                 {"handover_s": -0.5}, {"frame_dt_s": 0.0}])
 def test_bad_follower_setting_raises_naming_it(bad):
     (name,) = bad
     with pytest.raises(ValueError, match=f"WaypointFollowerConfig.{name} must be"):
