@@ -358,17 +358,17 @@ class ColourBoxRefiner:
             + (r1 == h - 1 and origin[1] + h < image_hw[0])
         )
         area = box.w_px * box.h_px
-        grey_reference = size_reference if self._bins.grey else None
-        reference_area = math.inf if grey_reference is None else grey_reference.w_px * grey_reference.h_px
-        area_ratio = area / min(previous.w_px * previous.h_px, reference_area)
-        span = area / reference_area  # of the tracker's box, on a grey image
-        fill = area_px / (size_reference.w_px * size_reference.h_px) if size_reference is not None else 0.0
+        tracker_area = math.inf if size_reference is None else size_reference.w_px * size_reference.h_px
+        grey_gates = self._bins.grey and size_reference is not None
+        previous_area = previous.w_px * previous.h_px
+        area_ratio = area / (min(previous_area, tracker_area) if grey_gates else previous_area)
+        fill, span = area_px / tracker_area, area / tracker_area  # of the tracker's box (0 without one)
         rejection = ""
         if not cfg.min_area_ratio <= area_ratio <= cfg.max_area_ratio:
             rejection = f"area ratio {area_ratio:.2f} outside [{cfg.min_area_ratio}, {cfg.max_area_ratio}]"
         elif fill > cfg.max_blob_fill_ratio:
             rejection = f"blob fills {fill:.2f} > {cfg.max_blob_fill_ratio} of the tracker's box"
-        elif grey_reference is not None and fill < cfg.grey_min_blob_fill_ratio and span < cfg.grey_min_blob_span_ratio:
+        elif grey_gates and fill < cfg.grey_min_blob_fill_ratio and span < cfg.grey_min_blob_span_ratio:
             rejection = (f"grey blob fills {fill:.2f} < {cfg.grey_min_blob_fill_ratio} of the tracker's box and spans "
                          f"{span:.2f} < {cfg.grey_min_blob_span_ratio} of it")
         elif touches > cfg.max_border_sides:

@@ -24,8 +24,7 @@ if TYPE_CHECKING:
 Record = dict[str, Any]
 # Issue 45's acceptance: "thermal night and day, desert and mountain: full TRADE tracked >= 0.95 with no switch on at
 # least 19 of 20 worlds; light stack ground RMSE (gt pose) <= 1 m pooled; the crossover and the city reported per
-# world (not gated), with the failure classes named"
-GATE_SCENES, GATE_TIMES = THERMAL_GATE_SCENES, THERMAL_GATE_TIMES
+# world (not gated), with the failure classes named" (the gated cells: suites.THERMAL_GATE_SCENES / _TIMES)
 GOOD_TRACKED_FRACTION = 0.95  # a world passes with at least this tracked fraction ...
 GOOD_MAX_SWITCHES = 0  # ... and no more decoy switches
 GATE_GOOD_WORLD_FRACTION = 19 / 20  # a cell passes when at least this fraction of its worlds do
@@ -83,13 +82,14 @@ def thermal_pivot(records: Sequence[Record]) -> list[str]:
 def gate_tables(runs: Sequence[RunResult]) -> list[str]:
     """Issue 45's gates on the gated cells present: full TRADE's good worlds per cell; the light stack's ground RMSE
     per cell and pooled over them."""
-    gated = [r for r in runs if r.error is None and r.spec.scene in GATE_SCENES and run_time(r) in GATE_TIMES]
+    gated = [r for r in runs
+             if r.error is None and r.spec.scene in THERMAL_GATE_SCENES and run_time(r) in THERMAL_GATE_TIMES]
     lines = []
     full = [r for r in gated if run_stack(r) == "full"]
     if full:
         rows = []
-        for scene in GATE_SCENES:
-            for time in GATE_TIMES:
+        for scene in THERMAL_GATE_SCENES:
+            for time in THERMAL_GATE_TIMES:
                 mine = [r for r in full if (r.spec.scene, run_time(r)) == (scene, time)]
                 if mine:
                     good = sum(good_world(r.metrics) for r in mine)
@@ -103,7 +103,7 @@ def gate_tables(runs: Sequence[RunResult]) -> list[str]:
         rmse = pooled_rmse(metric_values(light, "ground_depth_rmse_m"), metric_values(light, "ground_depth_frames"))
         met = math.isfinite(rmse) and rmse <= GATE_LIGHT_GROUND_RMSE_M
         lines += [f"Acceptance (issue 45), light stack: ground RMSE (gt pose) <= {GATE_LIGHT_GROUND_RMSE_M:g} m pooled "
-                  f"over every frame at {' and '.join(GATE_TIMES)} in {' and '.join(GATE_SCENES)}: "
+                  f"over every frame at {' and '.join(THERMAL_GATE_TIMES)} in {' and '.join(THERMAL_GATE_SCENES)}: "
                   f"{fmt(rmse)} m over {len(light)} worlds, {'met' if met else 'not met'}.", ""]
     return lines
 
