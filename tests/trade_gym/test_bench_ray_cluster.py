@@ -4,6 +4,7 @@ the run that was on it, which is run again on another node."""
 
 from __future__ import annotations
 
+import atexit
 import functools
 import json
 import logging
@@ -38,19 +39,36 @@ NODE_DEATH_TIMEOUT_S = 60.0  # until Ray has marked a killed node dead
 @pytest.fixture(scope="module")
 def cluster():
     """A head node and one worker node, 1 CPU each, this process connected as the driver; shut down even when a
-    test fails. A test may add and remove nodes of its own."""
+    test fails. A test may add and remove nodes of its own.
+
+    Each node started here registers an exit hook that holds the node (and its gRPC client) until this process
+    exits. Python 3.13's fork start method clears the exit hooks in the child, which frees those nodes there, and
+    the gRPC client's destructor then crashes the child (SIGSEGV in `pollset_shutdown`: its threads live only in
+    this process). A later test forking an `AsyncVectorEnv` died that way, so the hooks registered while the
+    cluster lives are unregistered here once it has shut down (a crash before that still runs them at exit)."""
     ray = pytest.importorskip("ray", reason="the ray extra is not installed (make test installs it)")
     from ray.cluster_utils import Cluster
 
-    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": NODE_CPUS, "include_dashboard": False,
-                                                            "object_store_memory": NODE_OBJECT_STORE_BYTES})
-    try:
-        cluster.add_node(num_cpus=NODE_CPUS, object_store_memory=NODE_OBJECT_STORE_BYTES)
-        ray.init(address=cluster.address, logging_level=logging.WARNING)
-        yield cluster
-    finally:
-        ray.shutdown()
-        cluster.shutdown()
+    exit_hooks = []
+    register = atexit.register
+
+    def recording_register(func, *args, **kwargs):
+        exit_hooks.append(func)
+        return register(func, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(atexit, "register", recording_register)
+        cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": NODE_CPUS, "include_dashboard": False,
+                                                                "object_store_memory": NODE_OBJECT_STORE_BYTES})
+        try:
+            cluster.add_node(num_cpus=NODE_CPUS, object_store_memory=NODE_OBJECT_STORE_BYTES)
+            ray.init(address=cluster.address, logging_level=logging.WARNING)
+            yield cluster
+        finally:
+            ray.shutdown()
+            cluster.shutdown()
+            for func in exit_hooks:  # the nodes are freed here, where their gRPC threads are
+                atexit.unregister(func)
 
 
 @pytest.fixture
