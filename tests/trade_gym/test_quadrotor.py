@@ -47,18 +47,16 @@ def world():
 def _fly(quad: Quadrotor, seconds: float, imu: Imu | None = None) -> dict[str, np.ndarray]:
     """Run 240 Hz physics under the current setpoint; per-step truth, and IMU batches per 1/30 s frame."""
     log: dict[str, list] = {"v": [], "R": [], "yaw": [], "w": [], "f": [], "pos": [], "batches": []}
+    t_s = quad.read_state().t_s
     for step in range(1, int(round(seconds / PHYSICS_DT_S)) + 1):
-        quad.physics_step(PHYSICS_DT_S)
-        p.stepSimulation(physicsClientId=quad.client_id)
+        t_s = quad.fly(1, PHYSICS_DT_S, t_s, None if imu is None else imu.add_truth_rows)
         s = quad.read_state()
         for key, value in (("v", s.velocity_mps), ("R", s.R_world_body), ("yaw", s.yaw_rad),
                            ("w", s.angular_velocity_body_radps), ("f", s.specific_force_body_mps2),
                            ("pos", s.position_m)):
             log[key].append(value)
-        if imu is not None:
-            imu.add_truth(s.t_s, s.specific_force_body_mps2, s.angular_velocity_body_radps)
-            if step % STEPS_PER_FRAME == 0:
-                log["batches"].append(imu.read())
+        if imu is not None and step % STEPS_PER_FRAME == 0:
+            log["batches"].append(imu.read())
     out = {k: np.array(v) for k, v in log.items() if k != "batches"}
     out["batches"] = log["batches"]
     return out

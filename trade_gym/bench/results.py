@@ -31,7 +31,7 @@ from trade_gym.provenance import cpu_model, git_commit  # noqa: F401  (git_commi
 SCHEMA_VERSION = 2  # 2: the scorecard metrics (success, following_rate, collision_rate, nre, dre, adq)
 SCHEMA_FILE = "results.schema.json"
 PACKAGES = ("numpy", "pybullet", "gymnasium", "opencv-python-headless", "onnxruntime", "stable-baselines3",
-            "filterpy", "matplotlib", "ray", "trade-gym")
+            "filterpy", "numba", "matplotlib", "ray", "trade-gym")
 RENDERER = "TinyRenderer"  # pybullet DIRECT mode's software renderer (the env's default)
 RENDERER_NAMES = {"tiny": RENDERER, "egl": "EGL"}  # by EnvConfig.renderer ("egl": pybullet's eglRenderer plugin)
 SERIES_FILE = "series.npz"  # every run's per-frame series, keyed "<run_id>/<field>" (see RunSeries)

@@ -132,6 +132,10 @@ class Imu:
         self._truth.append((float(t_s), float(f[0]), float(f[1]), float(f[2]),
                             float(w[0]), float(w[1]), float(w[2])))
 
+    def add_truth_rows(self, rows: FloatArray) -> None:
+        """Store truth rows (N, 7): time [s], specific force (3,) body [m/s^2], angular rate (3,) body [rad/s]."""
+        self._truth.extend(map(tuple, rows.tolist()))
+
     def read(self) -> ImuBatch:
         """Samples due since the previous read: t_s (N,), accel (N, 3) [m/s^2], gyro (N, 3) [rad/s]."""
         truth = self._truth

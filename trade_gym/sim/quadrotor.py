@@ -1,6 +1,7 @@
-"""Quadrotor airframe in pybullet and its cascaded (position ->) velocity -> attitude controller.
+"""Quadrotor airframe: its cascaded (position ->) velocity -> attitude controller and rigid-body flight (compiled in
+`flight_kernel`), and its box in pybullet for contact queries, rays and renders.
 
-Owns the rigid body (a box with mass and inertia), the setpoint limits and the ground-truth DroneState.
+Owns the airframe's configuration (mass, inertia, setpoint limits, gains) and the ground-truth DroneState.
 """
 
 from __future__ import annotations
@@ -14,16 +15,9 @@ import numpy.typing as npt
 import pybullet as p
 
 from trade.validation import is_finite_number, is_positive_number, require
+from trade_gym.sim import flight_kernel as fk
 
 FloatArray = npt.NDArray[np.float64]
-_Vec3 = tuple[float, float, float]
-# pybullet's state as read: position (3,), velocity (3,), row-major R_world_body (9,), body rates (3,)
-# (`_query_reading`); and position, velocity, angular velocity, R_world_body, body rates, specific force (`_sample`)
-_Read = tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], _Vec3]
-_Reading = tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, ...], _Vec3, _Vec3]
-
-_BODY_LINK = -1  # pybullet link index of a multibody's base
-_ORIGIN = (0.0, 0.0, 0.0)  # thrust acts at the centre of mass
 _AIRFRAME_RGBA = (0.15, 0.15, 0.15, 1.0)
 _RIGHT_ANGLE_DEG = 90.0
 _MIN_UPRIGHTNESS = 0.5  # floor on world z of body z when dividing by it (tilt is limited far below 60 deg)
@@ -111,61 +105,66 @@ class Quadrotor:
     """A box-shaped quadrotor flown by velocity (heading frame) and yaw-rate setpoints, or by a position and heading
     setpoint (world frame) that its position controller turns into those at every physics step.
 
-    Per physics step: `physics_step(dt_s)`, then `p.stepSimulation`, then `read_state()`.
-    `physics_step` reuses the reading of a `read_state()` made since the last step, and readings between two
-    steps reuse the first (each pybullet state query copies ~30 kB: two per reading), so move the airframe
-    only through `spawn()`, never between those calls.
-    Gravity is read from the engine at `spawn()`; the controller compensates it exactly.
+    The controller and the rigid-body dynamics run in `flight_kernel.fly` (compiled), `fly(n_steps, ...)` a frame
+    at a time; the pybullet body is a kinematic copy of the airframe, posed after each `fly` for contact queries
+    (`collided`), rays and renders. Gravity is read from the engine at `spawn()`; the controller compensates it
+    exactly.
     """
 
     def __init__(self, client_id: int, config: QuadrotorConfig | None = None) -> None:
         self.client_id = int(client_id)
         self.config = config if config is not None else QuadrotorConfig()
-        cfg = self.config
-        self._tan_tilt = math.tan(math.radians(cfg.max_tilt_deg - cfg.tilt_margin_deg))
-        self._k_att = cfg.attitude_natural_freq_radps**2  # kR = w^2
-        self._k_rate = 2.0 * cfg.attitude_damping_ratio * cfg.attitude_natural_freq_radps  # kw = 2 zeta w
         self.body_id: int | None = None
-        self._reset_internal(0.0)
-
-    def _reset_internal(self, yaw_rad: float) -> None:
-        self._setpoint = (0.0, 0.0, 0.0, 0.0)  # forward, left, up [m/s], yaw rate [rad/s]
-        self._position_sp: tuple[float, float, float, float] | None = None  # x, y, z [m] world, yaw [rad]
-        self._yaw_sp = float(yaw_rad)
+        self._params = np.zeros(fk.N_PARAMS)
+        self._state = np.zeros(fk.N_STATE)
+        self._command = np.zeros(fk.N_COMMAND)
+        self._truth = np.zeros((0, fk.N_TRUTH))
         self._t_s = 0.0
-        self._dt_s = 0.0
-        self._v_pre: tuple[float, ...] = (0.0, 0.0, 0.0)
-        self._m_pre: tuple[float, ...] | None = None  # row-major R_world_body before the last step
-        self._gravity_z = 0.0
-        self._last_read: _Read | None = None  # (v, R, body rates) of read_state()
-        self._reading: _Reading | None = None  # `_sample()` since the last step
+
+    def _fill_params(self, gravity_z: float) -> None:
+        cfg, prm = self.config, self._params
+        prm[fk.MASS], prm[fk.GRAVITY_Z] = cfg.mass_kg, gravity_z
+        prm[fk.JX], prm[fk.JY], prm[fk.JZ] = cfg.inertia_kgm2
+        prm[fk.K_VEL_H], prm[fk.K_VEL_V] = cfg.velocity_gain_horizontal_per_s, cfg.velocity_gain_vertical_per_s
+        prm[fk.A_MAX], prm[fk.MAX_YAW_LEAD] = cfg.max_accel_mps2, cfg.max_yaw_lead_rad
+        prm[fk.TAN_TILT] = math.tan(math.radians(cfg.max_tilt_deg - cfg.tilt_margin_deg))
+        prm[fk.MIN_T2W], prm[fk.MAX_T2W] = cfg.min_thrust_to_weight, cfg.max_thrust_to_weight
+        prm[fk.K_ATT] = cfg.attitude_natural_freq_radps**2  # kR = w^2
+        prm[fk.K_RATE] = 2.0 * cfg.attitude_damping_ratio * cfg.attitude_natural_freq_radps  # kw = 2 zeta w
+        prm[fk.K_POS_H], prm[fk.K_POS_V] = cfg.position_gain_horizontal_per_s, cfg.position_gain_vertical_per_s
+        prm[fk.K_YAW], prm[fk.MAX_YAW_RATE] = cfg.yaw_gain_per_s, cfg.max_yaw_rate_radps
+        prm[fk.V_MAX_H], prm[fk.V_MAX_V] = cfg.max_speed_horizontal_mps, cfg.max_speed_vertical_mps
+        prm[fk.MIN_UPRIGHTNESS] = _MIN_UPRIGHTNESS
 
     def spawn(self, position_m: npt.ArrayLike, yaw_rad: float) -> int:
-        """Create the airframe at `position_m` (3,) world [m], level, heading `yaw_rad`; returns its id."""
+        """Create the airframe at `position_m` (3,) world [m], level and at rest, heading `yaw_rad`; returns its id."""
         c, cfg = self.client_id, self.config
         pos = [float(v) for v in np.asarray(position_m, dtype=np.float64).reshape(3)]
         col = p.createCollisionShape(p.GEOM_BOX, halfExtents=cfg.half_extents_m, physicsClientId=c)
         vis = p.createVisualShape(p.GEOM_BOX, halfExtents=cfg.half_extents_m, rgbaColor=_AIRFRAME_RGBA,
                                   physicsClientId=c)
         quat = p.getQuaternionFromEuler((0.0, 0.0, float(yaw_rad)), physicsClientId=c)
-        body = p.createMultiBody(cfg.mass_kg, col, vis, pos, quat, physicsClientId=c)
-        p.changeDynamics(body, _BODY_LINK, linearDamping=0.0, angularDamping=0.0,
-                         localInertiaDiagonal=cfg.inertia_kgm2,
-                         activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=c)
-        self.body_id = body
-        self._reset_internal(yaw_rad)
-        self._gravity_z = float(p.getPhysicsEngineParameters(physicsClientId=c)["gravityAccelerationZ"])
-        return body
+        # mass 0 in maximal coordinates: a kinematic body stepSimulation leaves where `fly` puts it
+        self.body_id = p.createMultiBody(0.0, col, vis, pos, quat, useMaximalCoordinates=True, physicsClientId=c)
+        self._fill_params(float(p.getPhysicsEngineParameters(physicsClientId=c)["gravityAccelerationZ"]))
+        state = self._state
+        state[:] = 0.0
+        state[fk.POS:fk.POS + 3] = pos
+        state[fk.QUAT:fk.QUAT + 4] = quat
+        state[fk.YAW_SP] = float(yaw_rad)
+        state[fk.THRUST] = -cfg.mass_kg * self._params[fk.GRAVITY_Z]  # at rest: the IMU senses gravity
+        self._command[:] = (fk.VELOCITY_MODE, 0.0, 0.0, 0.0, 0.0)
+        self._t_s = 0.0
+        return self.body_id
 
     def set_setpoint(self, velocity_heading_mps: npt.ArrayLike, yaw_rate_radps: float) -> None:
-        """velocity_heading_mps: (3,) forward, left, up in the yaw-only heading frame [m/s]; clipped. Ends any
-        position setpoint."""
+        """velocity_heading_mps: (3,) forward, left, up in the yaw-only heading frame [m/s], with the yaw rate
+        [rad/s]; clipped to the setpoint limits (`QuadrotorConfig`). Ends any position setpoint."""
         fwd, left, up = (float(v) for v in np.asarray(velocity_heading_mps, dtype=np.float64).reshape(3))
         rate = float(yaw_rate_radps)
         if not all(math.isfinite(v) for v in (fwd, left, up, rate)):
             raise ValueError(f"setpoint must be finite, got velocity {(fwd, left, up)!r}, yaw rate {rate!r}")
-        self._position_sp = None
-        self._set_clipped(fwd, left, up, rate)
+        self._command[:] = (fk.VELOCITY_MODE, fwd, left, up, rate)
 
     def set_position_setpoint(self, position_m: npt.ArrayLike, yaw_rad: float) -> None:
         """Hold `position_m` (3,) world [m] and heading `yaw_rad` [rad] (PX4's offboard position setpoint) until the
@@ -175,213 +174,52 @@ class Quadrotor:
         yaw = float(yaw_rad)
         if not all(math.isfinite(v) for v in (x, y, z, yaw)):
             raise ValueError(f"position setpoint must be finite, got position {(x, y, z)!r}, yaw {yaw!r}")
-        self._position_sp = (x, y, z, yaw)
-
-    def _hold_position(self, position_sp: tuple[float, float, float, float], pos: tuple[float, ...],
-                       yaw: float) -> None:
-        """The velocity and yaw-rate setpoints of the position controller holding `position_sp` (x, y, z [m], yaw
-        [rad]) at position `pos` (3,) and heading `yaw`."""
-        cfg = self.config
-        x, y, z, yaw_sp = position_sp
-        kh = cfg.position_gain_horizontal_per_s
-        vx, vy = kh * (x - pos[0]), kh * (y - pos[1])  # world [m/s]
-        cy, sy = math.cos(yaw), math.sin(yaw)
-        # heading frame = Rz(yaw)^T world; the velocity controller rotates it back with the same yaw
-        self._set_clipped(cy * vx + sy * vy, -sy * vx + cy * vy, cfg.position_gain_vertical_per_s * (z - pos[2]),
-                          cfg.yaw_gain_per_s * _wrap(yaw_sp - yaw))
-
-    def _set_clipped(self, fwd: float, left: float, up: float, rate: float) -> None:
-        """The velocity (heading frame) [m/s] and yaw-rate [rad/s] setpoint, clipped to the setpoint limits."""
-        cfg = self.config
-        horizontal = math.hypot(fwd, left)
-        if horizontal > cfg.max_speed_horizontal_mps:  # clip the horizontal norm, keep the direction
-            scale = cfg.max_speed_horizontal_mps / horizontal
-            fwd, left = fwd * scale, left * scale
-        up = min(max(up, -cfg.max_speed_vertical_mps), cfg.max_speed_vertical_mps)
-        rate = min(max(rate, -cfg.max_yaw_rate_radps), cfg.max_yaw_rate_radps)
-        self._setpoint = (fwd, left, up, rate)
-
-    def physics_step(self, dt_s: float) -> None:
-        """Compute and apply thrust and torques (body frame) for the next physics step of `dt_s` [s]."""
-        if self.body_id is None:
-            raise RuntimeError("Quadrotor.physics_step called before spawn()")
-        c, b, cfg = self.client_id, self.body_id, self.config
-        # the reading of a read_state() since the last step (same pybullet state), else a fresh one
-        pos, vel, m, w_body = self._last_read or self._query_reading()
-        self._last_read = None
-        yaw = math.atan2(m[3], m[0])
-        if self._position_sp is not None:  # waypoint mode only: velocity mode pays no call per physics step
-            self._hold_position(self._position_sp, pos, yaw)
-        f = self._desired_specific_thrust(yaw, vel)
-        rate_sp = self._setpoint[3]
-        self._advance_yaw_setpoint(yaw, rate_sp, dt_s)
-        torque = self._attitude_torque(m, w_body, f, rate_sp)
-        # collective thrust T = m f_z / z_b,z realises the vertical acceleration whatever the attitude lag
-        weight = -cfg.mass_kg * self._gravity_z
-        thrust = cfg.mass_kg * f[2] / max(m[8], _MIN_UPRIGHTNESS)
-        thrust = min(max(thrust, 0.0), cfg.max_thrust_to_weight * weight)
-        p.applyExternalForce(b, _BODY_LINK, (0.0, 0.0, thrust), _ORIGIN, p.LINK_FRAME, physicsClientId=c)
-        p.applyExternalTorque(b, _BODY_LINK, torque, p.LINK_FRAME, physicsClientId=c)
-        self._v_pre, self._m_pre, self._dt_s = vel, m, float(dt_s)
-        self._reading = None  # the caller steps the simulation next
-        self._t_s += float(dt_s)
-
-    def _query_reading(self) -> _Read:
-        """(position (3,) world [m], velocity (3,) world [m/s], row-major R_world_body (9,), body rates (3,) [rad/s])
-        from pybullet."""
-        c, b = self.client_id, self.body_id
-        pos, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
-        vel, omega_w = p.getBaseVelocity(b, physicsClientId=c)
-        m = p.getMatrixFromQuaternion(quat, physicsClientId=c)  # row-major R_world_body
-        return pos, vel, m, _body_rates(m, omega_w)
-
-    def _advance_yaw_setpoint(self, yaw: float, rate_sp: float, dt_s: float) -> None:
-        """Yaw setpoint psi_d += r dt [rad], kept within max_yaw_lead of the current `yaw`."""
-        lead = _wrap(self._yaw_sp + rate_sp * dt_s - yaw)
-        lead = min(max(lead, -self.config.max_yaw_lead_rad), self.config.max_yaw_lead_rad)
-        self._yaw_sp = yaw + lead
-
-    def _attitude_torque(self, m: tuple[float, ...], w_body: tuple[float, float, float],
-                         f: tuple[float, float, float], rate_sp: float) -> tuple[float, float, float]:
-        """Body torque [N m] steering body z to the thrust direction `f` (3,) world and body x to the yaw
-        setpoint (geometric SO(3) PD law); m: row-major R_world_body (9,), w_body (3,) [rad/s]."""
-        fx, fy, fz = f
-        fn = math.sqrt(fx * fx + fy * fy + fz * fz)
-        zdx, zdy, zdz = fx / fn, fy / fn, fz / fn  # desired body z
-        cy, sy = math.cos(self._yaw_sp), math.sin(self._yaw_sp)
-        # y_d = z_d x x_c / |.| with x_c = (cos psi_d, sin psi_d, 0); x_d = y_d x z_d
-        ydx, ydy, ydz = -zdz * sy, zdz * cy, zdx * sy - zdy * cy
-        yn = math.sqrt(ydx * ydx + ydy * ydy + ydz * ydz)
-        ydx, ydy, ydz = ydx / yn, ydy / yn, ydz / yn
-        xdx, xdy, xdz = ydy * zdz - ydz * zdy, ydz * zdx - ydx * zdz, ydx * zdy - ydy * zdx
-        # body axes: the columns of R; x_b = (m0, m3, m6), y_b = (m1, m4, m7), z_b = (m2, m5, m8)
-        m0, m1, m2, m3, m4, m5, m6, m7, m8 = m
-        # e_R = 1/2 vee(Rd^T R - R^T Rd); (Rd^T R)_ij = col_i(Rd) . col_j(R)
-        ex = 0.5 * ((zdx * m1 + zdy * m4 + zdz * m7) - (ydx * m2 + ydy * m5 + ydz * m8))
-        ey = 0.5 * ((xdx * m2 + xdy * m5 + xdz * m8) - (zdx * m0 + zdy * m3 + zdz * m6))
-        ez = 0.5 * ((ydx * m0 + ydy * m3 + ydz * m6) - (xdx * m1 + xdy * m4 + xdz * m7))
-        # yawing at r with z_d fixed turns R_d about z_d at W = r (e_z . z_d) / (1 - (x_c . z_d)^2);
-        # desired body rate w_d = W R^T z_d
-        xc_dot_zd = cy * zdx + sy * zdy
-        spin = rate_sp * zdz / (1.0 - xc_dot_zd * xc_dot_zd)
-        wx, wy, wz = w_body
-        ewx = wx - spin * (m0 * zdx + m3 * zdy + m6 * zdz)
-        ewy = wy - spin * (m1 * zdx + m4 * zdy + m7 * zdz)
-        ewz = wz - spin * (m2 * zdx + m5 * zdy + m8 * zdz)
-        jx, jy, jz = self.config.inertia_kgm2
-        ka, kr = self._k_att, self._k_rate
-        # tau = J (-kR e_R - kw e_w) + w x J w
-        return (
-            jx * (-ka * ex - kr * ewx) + (jz - jy) * wy * wz,
-            jy * (-ka * ey - kr * ewy) + (jx - jz) * wz * wx,
-            jz * (-ka * ez - kr * ewz) + (jy - jx) * wx * wy,
-        )
+        self._command[:] = (fk.POSITION_MODE, x, y, z, yaw)
 
     def fly(self, n_steps: int, dt_s: float, t_s: float,
-            imu_truth: Callable[[float, tuple[float, ...], tuple[float, ...]], None]) -> float:
-        """Run `n_steps` physics steps of `dt_s` [s] from time `t_s` [s]: controller, pybullet step, then
-        `imu_truth(t, specific force (3,) body [m/s^2], rate (3,) body [rad/s])` after each; returns the
-        new time. Equivalent to the documented per-step sequence, in one call for the env's hot loop."""
-        c = self.client_id
-        for _ in range(n_steps):
-            self.physics_step(dt_s)
-            p.stepSimulation(physicsClientId=c)
-            t_s += dt_s
-            sample = self._sample()
-            imu_truth(t_s, sample[5], sample[4])
-        return t_s
-
-    def _desired_specific_thrust(self, yaw: float, vel: tuple[float, ...]) -> tuple[float, float, float]:
-        """Thrust per mass (3,) world [m/s^2]: f = clip(a_d) - g with tilt and thrust limits."""
-        cfg = self.config
-        fwd, left, up, _ = self._setpoint
-        cy, sy = math.cos(yaw), math.sin(yaw)
-        # v_sp world = Rz(yaw) (fwd, left, up); a_d = K (v_sp - v), |a_d,xy| <= a_max, |a_d,z| <= a_max
-        kh, kv = cfg.velocity_gain_horizontal_per_s, cfg.velocity_gain_vertical_per_s
-        a_max = cfg.max_accel_mps2
-        ax = kh * (cy * fwd - sy * left - vel[0])
-        ay = kh * (sy * fwd + cy * left - vel[1])
-        az = min(max(kv * (up - vel[2]), -a_max), a_max)
-        an = math.hypot(ax, ay)
-        if an > a_max:
-            s = a_max / an
-            ax, ay = ax * s, ay * s
-        g = -self._gravity_z
-        fz = max(az + g, cfg.min_thrust_to_weight * g)
-        horizontal = math.hypot(ax, ay)
-        h_max = fz * self._tan_tilt  # tilt limit: |f_xy| <= f_z tan(max_tilt)
-        if horizontal > h_max:
-            s = h_max / horizontal
-            ax, ay = ax * s, ay * s
-        return ax, ay, fz
-
-    def _sample(self) -> _Reading:
-        """Raw state after the last step: position, velocity, angular velocity (world), row-major
-        R_world_body, body rates R^T w and specific force R_pre^T ((v - v_pre)/dt - g)."""
+            imu_truth: Callable[[FloatArray], None] | None = None) -> float:
+        """Run `n_steps` physics steps of `dt_s` [s] from time `t_s` [s] (controller, then rigid-body step), pose the
+        pybullet body, and hand `imu_truth` the (n_steps, 7) rows of time [s], specific force (3,) body [m/s^2] and
+        body rates (3,) [rad/s] after each step; returns the new time."""
         if self.body_id is None:
-            raise RuntimeError("Quadrotor state read before spawn()")
-        if self._reading is not None:  # no step since: the same state
-            pos, vel, w, m, w_body, f_body = self._reading
-            self._last_read = (pos, vel, m, w_body)
-            return self._reading
-        c, b = self.client_id, self.body_id
-        pos, quat = p.getBasePositionAndOrientation(b, physicsClientId=c)
-        vel, w = p.getBaseVelocity(b, physicsClientId=c)
-        m = p.getMatrixFromQuaternion(quat, physicsClientId=c)  # row-major R_world_body
-        w_body = _body_rates(m, w)
-        self._last_read = (pos, vel, m, w_body)
-        if self._m_pre is None:  # nothing stepped yet: at rest
-            ax = ay = az = 0.0
-            mp = m
-        else:  # a = (v - v_pre) / dt, exact for the semi-implicit Euler step
-            inv_dt, v0 = 1.0 / self._dt_s, self._v_pre
-            ax, ay, az = (vel[0] - v0[0]) * inv_dt, (vel[1] - v0[1]) * inv_dt, (vel[2] - v0[2]) * inv_dt
-            mp = self._m_pre
-        az -= self._gravity_z  # f = a - g
-        f_body = (mp[0] * ax + mp[3] * ay + mp[6] * az, mp[1] * ax + mp[4] * ay + mp[7] * az,
-                  mp[2] * ax + mp[5] * ay + mp[8] * az)
-        self._reading = (pos, vel, w, m, w_body, f_body)
-        return self._reading
-
-    def read_imu_truth(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-        """(specific force (3,) body [m/s^2], angular rate (3,) body [rad/s]) after the last step:
-        the cheap read for physics sub-steps where only the IMU needs the state."""
-        _, _, _, _, w_body, f_body = self._sample()
-        return f_body, w_body
+            raise RuntimeError("Quadrotor.fly called before spawn()")
+        if len(self._truth) < n_steps:
+            self._truth = np.zeros((n_steps, fk.N_TRUTH))
+        truth = self._truth[:n_steps]
+        t_s = fk.fly(self._state, self._command, self._params, int(n_steps), float(dt_s), float(t_s), truth)
+        for _ in range(n_steps):  # the time since spawn, summed as the kernel sums it
+            self._t_s += float(dt_s)
+        s = self._state.tolist()
+        p.resetBasePositionAndOrientation(self.body_id, s[fk.POS:fk.POS + 3], s[fk.QUAT:fk.QUAT + 4],
+                                          physicsClientId=self.client_id)
+        if imu_truth is not None:
+            imu_truth(truth)
+        return float(t_s)
 
     def read_state(self) -> DroneState:
-        """Ground truth after the last step; specific force R_pre^T ((v - v_pre)/dt - g)."""
-        pos, vel, _, m, w_body, f_body = self._sample()
-        # one array: position (3), R (9), velocity (3), body rates (3), specific force (3)
-        flat = np.array((*pos, *m, *vel, *w_body, *f_body))
+        """Ground truth after the last step; specific force (0, 0, thrust / mass) in the body frame."""
+        if self.body_id is None:
+            raise RuntimeError("Quadrotor state read before spawn()")
+        s = self._state
+        R = np.array(fk.rotation(s)).reshape(3, 3)
         return DroneState(
-            position_m=flat[0:3],
-            R_world_body=flat[3:12].reshape(3, 3),
-            velocity_mps=flat[12:15],
-            angular_velocity_body_radps=flat[15:18],
-            yaw_rad=math.atan2(m[3], m[0]),
-            specific_force_body_mps2=flat[18:21],
+            position_m=s[fk.POS:fk.POS + 3].copy(),
+            R_world_body=R,
+            velocity_mps=s[fk.VEL:fk.VEL + 3].copy(),
+            angular_velocity_body_radps=s[fk.RATES:fk.RATES + 3].copy(),
+            yaw_rad=math.atan2(R[1, 0], R[0, 0]),
+            specific_force_body_mps2=np.array((0.0, 0.0, s[fk.THRUST] / self.config.mass_kg)),
             t_s=self._t_s,
         )
 
     def collided(self, static_body_ids: Iterable[int] | None = None) -> bool:
-        """True if the airframe touches any of `static_body_ids` (any body when None) after the last step."""
+        """True if the airframe touches any of `static_body_ids` (any body when None) where `fly` left it: a contact
+        query only for the bodies whose bounding boxes overlap the airframe's (none when it flies clear of them)."""
         if self.body_id is None:
             return False
-        contacts = p.getContactPoints(bodyA=self.body_id, physicsClientId=self.client_id)
-        if static_body_ids is None:
-            return len(contacts) > 0
-        ids = static_body_ids if isinstance(static_body_ids, (set, frozenset)) else set(static_body_ids)
-        return any(contact[2] in ids for contact in contacts)
-
-
-def _body_rates(m: tuple[float, ...], w_world: tuple[float, ...]) -> tuple[float, float, float]:
-    """Body rates w_b = R^T w_world [rad/s] from row-major R_world_body (9,) and world rates (3,)."""
-    return (m[0] * w_world[0] + m[3] * w_world[1] + m[6] * w_world[2],
-            m[1] * w_world[0] + m[4] * w_world[1] + m[7] * w_world[2],
-            m[2] * w_world[0] + m[5] * w_world[1] + m[8] * w_world[2])
-
-
-def _wrap(angle_rad: float) -> float:
-    """Wrap an angle to [-pi, pi)."""
-    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+        c, b = self.client_id, self.body_id
+        lo, hi = p.getAABB(b, physicsClientId=c)
+        near = {o[0] for o in p.getOverlappingObjects(lo, hi, physicsClientId=c) or ()} - {b}
+        if static_body_ids is not None:
+            near &= static_body_ids if isinstance(static_body_ids, (set, frozenset)) else set(static_body_ids)
+        return any(p.getClosestPoints(b, other, 0.0, physicsClientId=c) for other in near)
