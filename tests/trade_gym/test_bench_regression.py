@@ -55,7 +55,15 @@ def _recorded_results(ref, **changed) -> list[RunResult]:
 
 
 def _check_one(ref, run_id: str, **metrics) -> reference.ReferenceCheck:
-    return reference.check_against_reference(_recorded_results(ref, **{run_id: metrics}), ref)
+    """The check of one changed run on a machine with the reference's SIMD paths (where every run is strict)."""
+    return reference.check_against_reference(_recorded_results(ref, **{run_id: metrics}), ref, simd=ref["simd"])
+
+
+def _other_simd(current: dict) -> dict:
+    """SIMD paths other than `current`'s."""
+    avx2 = {"cpu_vector_isa": "AVX2", "simd_dispatch": {"numpy": "X86_V3", "opencv": "AVX2"}}
+    sse = {"cpu_vector_isa": "SSE4.2", "simd_dispatch": {"numpy": "X86_V2", "opencv": "SSE4.2"}}
+    return sse if current["simd_dispatch"] == avx2["simd_dispatch"] else avx2
 
 
 def test_quick_slice_reproduces_committed_reference(guard_results, ref):
@@ -73,7 +81,8 @@ def test_guard_flags_degraded_tracking_and_depth(guard_results, ref):
     run = guard_results[-1]
     worse = dict(run.metrics, tracked_fraction=run.metrics["tracked_fraction"] - 0.2,
                  ground_depth_rmse_m=2.0 * run.metrics["ground_depth_rmse_m"] + 1.0)
-    check = reference.check_against_reference([dataclasses.replace(run, metrics=worse)], ref, filtered=True)
+    check = reference.check_against_reference([dataclasses.replace(run, metrics=worse)], ref, filtered=True,
+                                              simd=ref["simd"])
     assert [p.split(" ")[1] for p in check.problems] == ["tracked_fraction", "ground_depth_rmse_m"]
 
 
@@ -170,6 +179,7 @@ def _fake_runs(results: list[RunResult]):
 
 
 def test_cli_check_reference_exits_1_on_an_improvement_and_0_when_reproduced(ref, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(reference, "simd_meta", lambda: ref["simd"])  # a machine of the reference's SIMD paths
     better = {TRADE_RUN: {"ground_depth_rmse_m": 0.5 * ref["runs"][TRADE_RUN]["metrics"]["ground_depth_rmse_m"]}}
     monkeypatch.setattr(cli, "run_all", _fake_runs(_recorded_results(ref, **better)))
     assert cli.main(["--suite", "quick", "--out", str(tmp_path / "a"), "--check-reference"]) == 1
@@ -268,9 +278,10 @@ def test_reference_records_the_simd_paths_and_a_check_on_other_paths_notes_it(re
     written = reference.load_reference(target)
     assert written["simd"] == simd_meta()
     assert reference.check_against_reference(_recorded_results(ref), written).simd_note is None  # same machine
-    other = {"cpu_vector_isa": "AVX2", "simd_dispatch": {"numpy": "X86_V3", "opencv": "AVX2"}}
+    other = _other_simd(simd_meta())
     note = reference.simd_note(other, simd_meta())
-    assert note is not None and "numpy X86_V3, opencv AVX2 (AVX2)" in note and "Reproducibility" in note
+    paths = ", ".join(f"{lib} {path}" for lib, path in other["simd_dispatch"].items())
+    assert note is not None and f"{paths} ({other['cpu_vector_isa']})" in note and "Reproducibility" in note
     assert reference.simd_note(None) is None  # a reference from before the paths were recorded
 
 
@@ -306,3 +317,19 @@ def test_reference_stack_pins_are_the_versions_the_reference_was_recorded_with(r
     pins = reference.stack_pins()
     assert {"numpy", "opencv-python-headless", "onnxruntime", "pybullet"} <= set(pins)
     assert ref["stack"] == pins  # the constraints make test installs with reproduce the reference
+
+
+def test_on_other_simd_paths_only_the_oracle_runs_must_reproduce(ref):
+    oracle_run = "follow/desert/scripted/oracle/gt/seed0"
+    rmse = ref["runs"][TRADE_RUN]["metrics"]["ground_depth_rmse_m"]
+    tracked = ref["runs"][oracle_run]["metrics"]["tracked_fraction"]
+    other = _other_simd(ref["simd"])
+    trade_moved = _recorded_results(ref, **{TRADE_RUN: {"ground_depth_rmse_m": 1.5 * rmse}})
+    check = reference.check_against_reference(trade_moved, ref, simd=other)
+    assert check.problems == () and check.simd_note is not None
+    assert len(check.path_dependent) == 1 and check.path_dependent[0].startswith(f"{TRADE_RUN}: ground_depth_rmse_m")
+    assert "1 expected on these SIMD paths" in check.summary_line()
+    oracle_moved = _recorded_results(ref, **{oracle_run: {"tracked_fraction": tracked - 0.01}})
+    check = reference.check_against_reference(oracle_moved, ref, simd=other)
+    assert len(check.problems) == 1 and check.problems[0].startswith(f"{oracle_run}: tracked_fraction")
+    assert reference.check_against_reference(trade_moved, ref, simd=ref["simd"]).path_dependent == ()

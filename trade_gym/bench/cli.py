@@ -384,6 +384,8 @@ def _reference_steps(args: argparse.Namespace, results: list[RunResult], filtere
         for note in (check.simd_note, check.stack_note):
             if note is not None:
                 print(note, file=sys.stderr)
+        for line in check.path_dependent:
+            print(f"  expected on these SIMD paths: {line}", file=sys.stderr)
         for line in check.problems:
             print(f"  {line}", file=sys.stderr)
         if check.problems:

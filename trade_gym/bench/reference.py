@@ -6,9 +6,11 @@ other metric may differ from the reference by at most FLOAT_ABS_TOL + FLOAT_REL_
 tight: on one machine the runs are bit-identical, so any difference is a change in behaviour; across CPUs that
 take the same SIMD paths float results drift in the last digits (~1e-15 relative seen so far), and 1e-6 leaves
 ample room for that while one frame scored differently moves a fraction of a 150-300-frame run by >= 3e-3. Across
-SIMD paths the closed loop does not reproduce: with numpy's AVX-512 dispatch turned off, one TRADE run of the
-suite differed by 0.19 m in ground RMSE (benchmarks/results/simd_paths.json, docs/benchmark.md). The reference
-therefore records the SIMD paths it was measured on (`simd_meta`), and a check on other paths says so.
+SIMD paths the image pipeline's closed loop does not reproduce: with numpy's AVX-512 dispatch turned off, one TRADE
+run of the suite differed by 0.19 m in ground RMSE (benchmarks/results/simd_paths.json, docs/benchmark.md). The
+reference therefore records the SIMD paths it was measured on (`simd_meta`). A check on other paths says so, and
+there only the oracle runs (no image pipeline) must reproduce; the image-perception runs' differences are printed as
+expected ones (`ReferenceCheck.path_dependent`), so `make test` passes on any CPU and stays strict on the reference's.
 Across package versions it does not reproduce either (numpy 2.5 against 2.4 moves the mountain TRADE run's ground
 RMSE by 0.17 m): the versions of the numeric stack are pinned in `reference_stack.txt`, a pip constraints file that
 `make test` installs with, the reference records the versions it was measured with (`stack_versions`), writing
@@ -37,6 +39,8 @@ from typing import Any
 from trade_gym.bench.results import package_versions, simd_meta, to_json_safe
 from trade_gym.bench.runner import RunResult
 from trade_gym.provenance import git_head, tracked_changes
+
+ORACLE_PERCEPTION = "oracle"  # runs without the image pipeline: they reproduce on any SIMD path
 
 REFERENCE_FILE = "quick_reference.json"
 STACK_FILE = "reference_stack.txt"  # pip constraints: the numeric packages the reference reproduces with
@@ -238,12 +242,16 @@ class ReferenceCheck:
     simd_note: str | None = None
     # set when the reference was measured with other package versions than this environment's (`stack_note`)
     stack_note: str | None = None
+    # differences of image-perception runs where this machine's SIMD paths are not the reference's: expected, not
+    # problems (only the oracle runs must reproduce there)
+    path_dependent: tuple[str, ...] = ()
 
     def summary_line(self) -> str:
         scope = " (suite filtered)" if self.filtered else ""
         count = len(self.problems)
+        expected = f", {len(self.path_dependent)} expected on these SIMD paths" if self.path_dependent else ""
         return (f"reference check: {self.compared} of {self.reference_runs} reference runs compared{scope}, "
-                f"{count} problem{'' if count == 1 else 's'}")
+                f"{count} problem{'' if count == 1 else 's'}{expected}")
 
 
 def _run_problem(result: RunResult, entry: dict[str, Any]) -> str | None:
@@ -257,13 +265,15 @@ def _run_problem(result: RunResult, entry: dict[str, Any]) -> str | None:
     return None
 
 
-def check_against_reference(results: Sequence[RunResult], reference: dict[str, Any],
-                            filtered: bool = False) -> ReferenceCheck:
+def check_against_reference(results: Sequence[RunResult], reference: dict[str, Any], filtered: bool = False,
+                            simd: dict[str, Any] | None = None) -> ReferenceCheck:
     """Compare every result with its reference entry. A result without an entry (or of another length or
     camera size, or failed) is a problem; so is a reference run without a result, unless `filtered` says
-    only a part of the suite was run."""
+    only a part of the suite was run. `simd`: this machine's SIMD paths (`simd_meta()` when None); where they are
+    not the reference's, an image-perception run's differences go to `path_dependent`, not `problems`."""
     runs: dict[str, Any] = reference["runs"]
-    problems, compared = [], 0
+    note = simd_note(reference.get("simd"), simd)
+    problems, expected, compared = [], [], 0
     for result in results:
         entry = runs.get(result.spec.run_id)
         if entry is None:
@@ -273,12 +283,16 @@ def check_against_reference(results: Sequence[RunResult], reference: dict[str, A
             problems.append(problem)
             continue
         compared += 1
-        problems += compare_run(result.spec.run_id, result.metrics, entry["metrics"])
+        differences = compare_run(result.spec.run_id, result.metrics, entry["metrics"])
+        if note is not None and result.spec.perception != ORACLE_PERCEPTION:
+            expected += differences
+        else:
+            problems += differences
     if not filtered:
         present = {r.spec.run_id for r in results}
         problems += [f"{run_id}: in the reference, not in the results" for run_id in runs if run_id not in present]
-    return ReferenceCheck(tuple(problems), compared, len(runs), filtered, simd_note(reference.get("simd")),
-                          stack_note(reference.get("stack")))
+    return ReferenceCheck(tuple(problems), compared, len(runs), filtered, note, stack_note(reference.get("stack")),
+                          tuple(expected))
 
 
 def simd_note(recorded: dict[str, Any] | None, current: dict[str, Any] | None = None) -> str | None:
@@ -290,5 +304,5 @@ def simd_note(recorded: dict[str, Any] | None, current: dict[str, Any] | None = 
     def paths(meta: dict[str, Any]) -> str:
         return ", ".join(f"{lib} {path}" for lib, path in meta["simd_dispatch"].items())
     return (f"note: the reference was measured with {paths(recorded)} ({recorded.get('cpu_vector_isa')}); this "
-            f"machine dispatches {paths(current)}. Closed-loop runs differ across SIMD paths, so differences here "
-            f"may come from the CPU (docs/benchmark.md, 'Reproducibility').")
+            f"machine dispatches {paths(current)}. The image pipeline's closed loop differs across SIMD paths, so "
+            f"here only the oracle runs must reproduce (docs/benchmark.md, 'Reproducibility').")
