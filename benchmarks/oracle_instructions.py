@@ -1,6 +1,6 @@
 """Before/after instructions per oracle step under valgrind's cachegrind: deterministic where step rates on a
 shared host swing by +-20 %. Each tree runs the same probe twice (N steps and 0 steps); the difference over N
-is the per-step count (the scripted follower's predict plus `env.step`; imports and reset cancel out).
+is the per-step count (the scripted follower's predict plus `env.step`; imports, reset and a warm-up step cancel out).
 
 Usage: git worktree add /tmp/base <commit>; python benchmarks/oracle_instructions.py --base /tmp/base
        [--scene desert] [--steps 300] [--json OUT]     (needs valgrind; ~1 min per run)
@@ -27,17 +27,21 @@ from trade_gym.env import TradeFollowEnv
 env = TradeFollowEnv(scene=sys.argv[1], perception="oracle")
 policy = ScriptedFollower()
 obs, _ = env.reset(seed=0)
-for _ in range(int(sys.argv[2])):
+for _ in range(WARM_UP_STEPS + int(sys.argv[2])):
     obs, *_ = env.step(policy.predict(obs)[0])
 env.close()
 """
 _TOTAL = re.compile(r"I\s+refs:\s+([\d,]+)")
+# steps both runs take first: one-time costs of a process's first step (the flight kernel's load from numba's cache)
+# cancel out like imports and reset
+WARM_UP_STEPS = 1
 
 
 def _instructions(tree: Path, scene: str, steps: int) -> int:
     """Instructions the probe executes in `tree` (cachegrind's I refs, no cache simulation)."""
+    probe = f"WARM_UP_STEPS = {WARM_UP_STEPS}\n{_PROBE}"
     out = subprocess.run(["valgrind", "--tool=cachegrind", "--cache-sim=no", "--cachegrind-out-file=/dev/null",
-                          sys.executable, "-c", _PROBE, scene, str(steps)], cwd=import_root(tree), env=probe_env(tree),
+                          sys.executable, "-c", probe, scene, str(steps)], cwd=import_root(tree), env=probe_env(tree),
                          capture_output=True, text=True, check=True).stderr
     match = _TOTAL.search(out)
     if match is None:
@@ -46,6 +50,7 @@ def _instructions(tree: Path, scene: str, steps: int) -> int:
 
 
 def per_step(tree: Path, scene: str, steps: int) -> float:
+    _instructions(tree, scene, 0)  # fills numba's cache (the flight kernel), so neither measured run compiles
     return (_instructions(tree, scene, steps) - _instructions(tree, scene, 0)) / steps
 
 
