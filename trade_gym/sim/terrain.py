@@ -13,6 +13,7 @@ from functools import cached_property
 import cv2
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from trade_gym.sim.spline import CatmullRomSpline
 
@@ -20,6 +21,24 @@ FloatArray = npt.NDArray[np.float64]
 
 PATH_RASTER_STEP_CELLS = 0.25  # path sampling step when rasterising it onto the grid [cells]
 EXACT_DISTANCE_CHUNK = 4096  # grid nodes per chunk for exact distance-to-path refinement
+
+
+@njit(cache=True)
+def grid_height(h, nx, ny, ox, oy, d, x_m, y_m):
+    """Scalar `Heightfield.height_m` [m] at (x_m, y_m) from `Heightfield.grid`'s arguments: the same triangles,
+    equations and rounding (float32 heights widened exactly), clamped to the grid's edge; NaN in, NaN out."""
+    u, v = (x_m - ox) / d, (y_m - oy) / d
+    u = 0.0 if u < 0.0 else (nx - 1.0 if u > nx - 1.0 else u)
+    v = 0.0 if v < 0.0 else (ny - 1.0 if v > ny - 1.0 else v)
+    if u != u or v != v:
+        return math.nan
+    i, j = min(int(u), nx - 2), min(int(v), ny - 2)  # u, v >= 0 so int() is floor()
+    fu, fv, k = u - i, v - j, j * nx + i
+    if fu + fv <= 1.0:
+        h00 = np.float64(h[k])
+        return h00 + fu * (np.float64(h[k + 1]) - h00) + fv * (np.float64(h[k + nx]) - h00)
+    h11 = np.float64(h[k + nx + 1])
+    return h11 + (1.0 - fu) * (np.float64(h[k + nx]) - h11) + (1.0 - fv) * (np.float64(h[k + 1]) - h11)
 
 
 @dataclass(frozen=True, eq=False)
@@ -112,26 +131,15 @@ class Heightfield:
         ny, nx = self.shape
         return self.heights_m.ravel().tolist(), nx, ny, self.origin_m[0], self.origin_m[1], self.spacing_m
 
+    @cached_property
+    def grid(self) -> tuple[npt.NDArray[np.float32], int, int, float, float, float]:
+        """The compiled queries' arguments: row-major heights (flat, float32), nx, ny, origin x, y [m], spacing [m]."""
+        ny, nx = self.shape
+        return self.heights_m.ravel(), nx, ny, self.origin_m[0], self.origin_m[1], self.spacing_m
+
     def height_at(self, x_m: float, y_m: float) -> float:
-        """Scalar `height_m` [m]: the same equations and rounding in plain floats (the per-step hot path, so the
-        cell lookup is inlined and clamps use comparisons, cheaper than builtin min/max calls); NaN -> NaN."""
-        h, nx, ny, ox, oy, d = self._scalar_grid
-        u, v = (x_m - ox) / d, (y_m - oy) / d
-        u = 0.0 if u < 0.0 else (nx - 1.0 if u > nx - 1.0 else u)
-        v = 0.0 if v < 0.0 else (ny - 1.0 if v > ny - 1.0 else v)
-        if u != u or v != v:
-            return math.nan
-        i, j = int(u), int(v)  # u, v >= 0 so int() is floor()
-        if i > nx - 2:
-            i = nx - 2
-        if j > ny - 2:
-            j = ny - 2
-        fu, fv, k = u - i, v - j, j * nx + i
-        if fu + fv <= 1.0:
-            h00 = h[k]
-            return h00 + fu * (h[k + 1] - h00) + fv * (h[k + nx] - h00)
-        h11 = h[k + nx + 1]
-        return h11 + (1.0 - fu) * (h[k + nx] - h11) + (1.0 - fv) * (h[k + 1] - h11)
+        """Scalar `height_m` [m] (compiled, `grid_height`): the same equations and rounding; NaN -> NaN."""
+        return grid_height(*self.grid, float(x_m), float(y_m))
 
     def gradient_at(self, x_m: float, y_m: float) -> tuple[float, float]:
         """Scalar `gradient`: (dh/dx, dh/dy) of the triangle under (x, y); NaN in, NaN out."""

@@ -1,6 +1,6 @@
 """Per-time vehicle poses for the env's step loop: scalar terrain-hugging poses, a per-time cache, body placement.
 
-Owns `VehiclePoses` and `pose_at` (one vehicle in plain `math`, faster than numpy for the few vehicles of a scene).
+Owns `VehiclePoses` and `pose_at` (one vehicle at a time, its terrain pose compiled: `terrain_pose`).
 """
 
 from __future__ import annotations
@@ -10,9 +10,10 @@ import math
 import numpy as np
 import numpy.typing as npt
 import pybullet as p
+from numba import njit
 
 from trade.geometry import matrix_to_quat_xyzw
-from trade_gym.sim.terrain import Heightfield
+from trade_gym.sim.terrain import Heightfield, grid_height
 from trade_gym.sim.vehicles import Vehicle
 
 FloatArray = npt.NDArray[np.float64]
@@ -20,27 +21,37 @@ Pose12 = tuple[float, ...]  # centre x, y, z [m], then R_world_vehicle row-major
 
 
 def pose_at(terrain: Heightfield, v: Vehicle, t_s: float) -> Pose12:
-    """Scalar `vehicles.terrain_pose` of `v` at time t_s: the box rests on the plane through its footprint.
+    """Scalar `vehicles.terrain_pose` of `v` at time t_s: the box rests on the plane through its footprint
+    (`terrain_pose`, compiled)."""
+    x, y, c, s = v.motion.planar_pose(t_s)  # heading (c, s) = (cos, sin): the path's tangent unless it swerves
+    hx, hy, hz = v.half_extents_m.tolist()
+    return terrain_pose(*terrain.grid, x, y, c, s, hx, hy, hz)
+
+
+@njit(cache=True)
+def terrain_pose(h, nx, ny, ox, oy, d, x, y, c, s, hx, hy, hz):
+    """Centre (3) and row-major R_world_vehicle (9) of a box of half extents (hx, hy, hz) [m] at (x, y) heading
+    (c, s) = (cos, sin) on the terrain `Heightfield.grid` describes.
 
     Corners FL, FR, RL, RR at (x, y) +- half_x fwd +- half_y left; slopes along fwd and left from their heights;
     n = (-pitch fwd - roll left, 1) / |.|, x_axis = (fwd, pitch) / |.|, y_axis = n x x_axis, and the
     bottom face's centre on the terrain: centre = (x, y, h(x, y)) + half_z n.
     """
-    x, y, c, s = v.motion.planar_pose(t_s)  # heading (c, s) = (cos, sin): the path's tangent unless it swerves
-    hx, hy, hz = v.half_extents_m.tolist()
     fx, fy, lx, ly = c * hx, s * hx, -s * hy, c * hy
-    h = terrain.height_at
-    z_fl, z_fr = h(x + (fx + lx), y + (fy + ly)), h(x + (fx - lx), y + (fy - ly))
-    z_rl, z_rr = h(x + (lx - fx), y + (ly - fy)), h(x + (-fx - lx), y + (-fy - ly))
+    z_fl = grid_height(h, nx, ny, ox, oy, d, x + (fx + lx), y + (fy + ly))
+    z_fr = grid_height(h, nx, ny, ox, oy, d, x + (fx - lx), y + (fy - ly))
+    z_rl = grid_height(h, nx, ny, ox, oy, d, x + (lx - fx), y + (ly - fy))
+    z_rr = grid_height(h, nx, ny, ox, oy, d, x + (-fx - lx), y + (-fy - ly))
     pitch = (z_fl + z_fr - z_rl - z_rr) / (4.0 * hx)  # dz per metre forward
     roll = (z_fl + z_rl - z_fr - z_rr) / (4.0 * hy)  # dz per metre left
-    nx, ny = -pitch * c + roll * s, -pitch * s - roll * c
-    inv = 1.0 / math.sqrt(nx * nx + ny * ny + 1.0)
-    nx, ny, nz = nx * inv, ny * inv, inv
+    nx_, ny_ = -pitch * c + roll * s, -pitch * s - roll * c
+    inv = 1.0 / math.sqrt(nx_ * nx_ + ny_ * ny_ + 1.0)
+    nx_, ny_, nz_ = nx_ * inv, ny_ * inv, inv
     inv = 1.0 / math.sqrt(c * c + s * s + pitch * pitch)
     ax, ay, az = c * inv, s * inv, pitch * inv
-    bx, by, bz = ny * az - nz * ay, nz * ax - nx * az, nx * ay - ny * ax  # n x x_axis
-    return (x + hz * nx, y + hz * ny, h(x, y) + hz * nz, ax, bx, nx, ay, by, ny, az, bz, nz)
+    bx, by, bz = ny_ * az - nz_ * ay, nz_ * ax - nx_ * az, nx_ * ay - ny_ * ax  # n x x_axis
+    z = grid_height(h, nx, ny, ox, oy, d, x, y)
+    return (x + hz * nx_, y + hz * ny_, z + hz * nz_, ax, bx, nx_, ay, by, ny_, az, bz, nz_)
 
 
 def _arrays(pose: Pose12) -> tuple[FloatArray, FloatArray]:
