@@ -367,7 +367,7 @@ class TradeFollowEnv(gym.Env):
         dt = 1.0 / PHYSICS_RATE_HZ
         previous = self._state.position_m.tolist()
         quadrotor = self.quadrotor
-        self._t_s = quadrotor.fly(self.config.physics_steps_per_frame, dt, self._t_s, self.imu.add_truth_rows)
+        self._t_s = quadrotor.fly(self.config.physics_steps_per_frame, dt, self.imu.add_truth_rows)  # since spawn
         self._state = quadrotor.read_state()
         self._distance_flown_m += math.dist(self._state.position_m.tolist(), previous)
         self.world.update(self._t_s, self._state.position_m)  # an evasive target reacts to the drone

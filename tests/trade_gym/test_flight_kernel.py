@@ -94,7 +94,8 @@ def test_fly_writes_one_truth_row_per_step_with_the_thrust_on_body_z():
     state = _state((0.0, 0.0, 10.0), (0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0))
     command = np.array((fk.VELOCITY_MODE, 2.0, 0.0, 0.0, 0.0))
     truth = np.zeros((8, fk.N_TRUTH))
-    t_s = fk.fly(state, command, prm, 8, DT_S, 1.0, truth)
+    state[fk.TIME] = 1.0
+    t_s = fk.fly(state, command, prm, 8, DT_S, truth)
     assert t_s == pytest.approx(1.0 + 8 * DT_S)
     np.testing.assert_allclose(truth[:, 0], 1.0 + DT_S * np.arange(1, 9), atol=1e-12)
     assert np.all(truth[:, 1:3] == 0.0) and np.all(truth[:, 3] > 0.0)

@@ -47,9 +47,8 @@ def world():
 def _fly(quad: Quadrotor, seconds: float, imu: Imu | None = None) -> dict[str, np.ndarray]:
     """Run 240 Hz physics under the current setpoint; per-step truth, and IMU batches per 1/30 s frame."""
     log: dict[str, list] = {"v": [], "R": [], "yaw": [], "w": [], "f": [], "pos": [], "batches": []}
-    t_s = quad.read_state().t_s
     for step in range(1, int(round(seconds / PHYSICS_DT_S)) + 1):
-        t_s = quad.fly(1, PHYSICS_DT_S, t_s, None if imu is None else imu.add_truth_rows)
+        quad.fly(1, PHYSICS_DT_S, None if imu is None else imu.add_truth_rows)
         s = quad.read_state()
         for key, value in (("v", s.velocity_mps), ("R", s.R_world_body), ("yaw", s.yaw_rad),
                            ("w", s.angular_velocity_body_radps), ("f", s.specific_force_body_mps2),

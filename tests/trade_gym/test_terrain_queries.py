@@ -37,7 +37,15 @@ def test_compiled_vehicle_pose_equals_the_vectorised_terrain_pose_to_rounding(fi
     centres, rotations = terrain_pose(field, xy, heading, HALF_EXTENTS_M)
     for i in range(len(heading)):
         c, s = math.cos(heading[i]), math.sin(heading[i])
-        pose = scalar_terrain_pose(*field.grid, float(xy[i, 0]), float(xy[i, 1]), c, s, *HALF_EXTENTS_M)
+        pose = scalar_terrain_pose(field.grid, float(xy[i, 0]), float(xy[i, 1]), c, s, *HALF_EXTENTS_M)
         # numpy's vectorised cos/sin and norms round in other places than the scalar code: 1 ulp seen
         np.testing.assert_allclose(pose[:3], centres[i], rtol=0, atol=POSE_TOL)
         np.testing.assert_allclose(pose[3:], rotations[i].ravel(), rtol=0, atol=POSE_TOL)
+
+
+def test_gradient_at_equals_gradient_bit_for_bit_inside_and_beyond_the_grid(field):
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(-70.0, 70.0, N_POINTS), rng.uniform(-60.0, 60.0, N_POINTS)
+    scalar = np.array([field.gradient_at(a, b) for a, b in zip(x.tolist(), y.tolist())])
+    assert np.array_equal(scalar, field.gradient(x, y))
+    assert all(math.isnan(g) for g in field.gradient_at(math.nan, 0.0))

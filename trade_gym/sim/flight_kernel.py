@@ -22,9 +22,9 @@ from numba import njit
 FloatArray = npt.NDArray[np.float64]
 
 # state (N_STATE,): position (3) world [m], velocity (3) world [m/s], quaternion x, y, z, w (R_world_body), body rates
-# (3) [rad/s], the yaw setpoint [rad], the last thrust [N]
-POS, VEL, QUAT, RATES, YAW_SP, THRUST = 0, 3, 6, 10, 13, 14
-N_STATE = 15
+# (3) [rad/s], the yaw setpoint [rad], the last thrust [N], the time since spawn [s]
+POS, VEL, QUAT, RATES, YAW_SP, THRUST, TIME = 0, 3, 6, 10, 13, 14, 15
+N_STATE = 16
 # command (N_COMMAND,): MODE (VELOCITY_MODE: forward, left, up [m/s] heading frame and yaw rate [rad/s];
 # POSITION_MODE: x, y, z [m] world and yaw [rad]) then those four numbers
 MODE, SETPOINT = 0, 1
@@ -153,9 +153,9 @@ def _integrate(state, m, thrust, tx, ty, tz, dt, prm):
 
 
 @njit(cache=True)
-def fly(state, command, prm, n_steps, dt, t_s, truth):
-    """`n_steps` sub-steps of `dt` [s] from time `t_s` [s]: controller, then rigid-body step; `state` (N_STATE,) is
-    advanced in place and `truth` (>= n_steps, N_TRUTH) receives each sub-step's time, specific force and body
+def fly(state, command, prm, n_steps, dt, truth):
+    """`n_steps` sub-steps of `dt` [s]: controller, then rigid-body step; `state` (N_STATE,) is advanced in place,
+    its time included, and `truth` (>= n_steps, N_TRUTH) receives each sub-step's time, specific force and body
     rates. Returns the new time [s]."""
     for k in range(n_steps):
         m = rotation(state)
@@ -171,8 +171,8 @@ def fly(state, command, prm, n_steps, dt, t_s, truth):
         thrust = min(max(thrust, 0.0), prm[MAX_T2W] * weight)
         _integrate(state, m, thrust, tx, ty, tz, dt, prm)
         state[THRUST] = thrust
-        t_s += dt
-        truth[k, 0] = t_s
+        state[TIME] += dt
+        truth[k, 0] = state[TIME]
         truth[k, 1], truth[k, 2], truth[k, 3] = 0.0, 0.0, thrust / prm[MASS]
         truth[k, 4], truth[k, 5], truth[k, 6] = state[RATES], state[RATES + 1], state[RATES + 2]
-    return t_s
+    return state[TIME]

@@ -119,7 +119,6 @@ class Quadrotor:
         self._state = np.zeros(fk.N_STATE)
         self._command = np.zeros(fk.N_COMMAND)
         self._truth = np.zeros((0, fk.N_TRUTH))
-        self._t_s = 0.0
 
     def _fill_params(self, gravity_z: float) -> None:
         cfg, prm = self.config, self._params
@@ -154,7 +153,6 @@ class Quadrotor:
         state[fk.YAW_SP] = float(yaw_rad)
         state[fk.THRUST] = -cfg.mass_kg * self._params[fk.GRAVITY_Z]  # at rest: the IMU senses gravity
         self._command[:] = (fk.VELOCITY_MODE, 0.0, 0.0, 0.0, 0.0)
-        self._t_s = 0.0
         return self.body_id
 
     def set_setpoint(self, velocity_heading_mps: npt.ArrayLike, yaw_rate_radps: float) -> None:
@@ -176,19 +174,16 @@ class Quadrotor:
             raise ValueError(f"position setpoint must be finite, got position {(x, y, z)!r}, yaw {yaw!r}")
         self._command[:] = (fk.POSITION_MODE, x, y, z, yaw)
 
-    def fly(self, n_steps: int, dt_s: float, t_s: float,
-            imu_truth: Callable[[FloatArray], None] | None = None) -> float:
-        """Run `n_steps` physics steps of `dt_s` [s] from time `t_s` [s] (controller, then rigid-body step), pose the
-        pybullet body, and hand `imu_truth` the (n_steps, 7) rows of time [s], specific force (3,) body [m/s^2] and
-        body rates (3,) [rad/s] after each step; returns the new time."""
+    def fly(self, n_steps: int, dt_s: float, imu_truth: Callable[[FloatArray], None] | None = None) -> float:
+        """Run `n_steps` physics steps of `dt_s` [s] (controller, then rigid-body step), pose the pybullet body, and
+        hand `imu_truth` the (n_steps, 7) rows of time since spawn [s], specific force (3,) body [m/s^2] and body
+        rates (3,) [rad/s] after each step; returns the new time since spawn [s]."""
         if self.body_id is None:
             raise RuntimeError("Quadrotor.fly called before spawn()")
         if len(self._truth) < n_steps:
             self._truth = np.zeros((n_steps, fk.N_TRUTH))
         truth = self._truth[:n_steps]
-        t_s = fk.fly(self._state, self._command, self._params, int(n_steps), float(dt_s), float(t_s), truth)
-        for _ in range(n_steps):  # the time since spawn, summed as the kernel sums it
-            self._t_s += float(dt_s)
+        t_s = fk.fly(self._state, self._command, self._params, int(n_steps), float(dt_s), truth)
         s = self._state.tolist()
         p.resetBasePositionAndOrientation(self.body_id, s[fk.POS:fk.POS + 3], s[fk.QUAT:fk.QUAT + 4],
                                           physicsClientId=self.client_id)
@@ -209,7 +204,7 @@ class Quadrotor:
             angular_velocity_body_radps=s[fk.RATES:fk.RATES + 3].copy(),
             yaw_rad=math.atan2(R[1, 0], R[0, 0]),
             specific_force_body_mps2=np.array((0.0, 0.0, s[fk.THRUST] / self.config.mass_kg)),
-            t_s=self._t_s,
+            t_s=float(s[fk.TIME]),
         )
 
     def collided(self, static_body_ids: Iterable[int] | None = None) -> bool:

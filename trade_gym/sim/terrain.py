@@ -24,21 +24,51 @@ EXACT_DISTANCE_CHUNK = 4096  # grid nodes per chunk for exact distance-to-path r
 
 
 @njit(cache=True)
-def grid_height(h, nx, ny, ox, oy, d, x_m, y_m):
-    """Scalar `Heightfield.height_m` [m] at (x_m, y_m) from `Heightfield.grid`'s arguments: the same triangles,
-    equations and rounding (float32 heights widened exactly), clamped to the grid's edge; NaN in, NaN out."""
-    u, v = (x_m - ox) / d, (y_m - oy) / d
-    u = 0.0 if u < 0.0 else (nx - 1.0 if u > nx - 1.0 else u)
-    v = 0.0 if v < 0.0 else (ny - 1.0 if v > ny - 1.0 else v)
+def _cell(grid, x_m, y_m):
+    """(i, j, fu, fv) of (x_m, y_m) on `Heightfield.grid`: the cell's node and the fractions in it, clamped to the
+    grid; NaN in gives NaN fractions."""
+    _, nx, ny, ox, oy, d = grid
+    u = min(max((x_m - ox) / d, 0.0), nx - 1.0)
+    v = min(max((y_m - oy) / d, 0.0), ny - 1.0)
     if u != u or v != v:
-        return math.nan
+        return 0, 0, math.nan, math.nan
     i, j = min(int(u), nx - 2), min(int(v), ny - 2)  # u, v >= 0 so int() is floor()
-    fu, fv, k = u - i, v - j, j * nx + i
+    return i, j, u - i, v - j
+
+
+@njit(cache=True)
+def _corners(grid, i, j):
+    """Heights h00, h10, h01, h11 [m] of cell (i, j), float32 widened exactly."""
+    h, nx = grid[0], grid[1]
+    k = j * nx + i
+    return np.float64(h[k]), np.float64(h[k + 1]), np.float64(h[k + nx]), np.float64(h[k + nx + 1])
+
+
+@njit(cache=True)
+def grid_height(grid, x_m, y_m):
+    """Scalar `Heightfield.height_m` [m] at (x_m, y_m) on `Heightfield.grid`: the same triangles, equations and
+    rounding, clamped to the grid's edge; NaN in, NaN out."""
+    i, j, fu, fv = _cell(grid, x_m, y_m)
+    if fu != fu:
+        return math.nan
+    h00, h10, h01, h11 = _corners(grid, i, j)
     if fu + fv <= 1.0:
-        h00 = np.float64(h[k])
-        return h00 + fu * (np.float64(h[k + 1]) - h00) + fv * (np.float64(h[k + nx]) - h00)
-    h11 = np.float64(h[k + nx + 1])
-    return h11 + (1.0 - fu) * (np.float64(h[k + nx]) - h11) + (1.0 - fv) * (np.float64(h[k + 1]) - h11)
+        return h00 + fu * (h10 - h00) + fv * (h01 - h00)
+    return h11 + (1.0 - fu) * (h01 - h11) + (1.0 - fv) * (h10 - h11)
+
+
+@njit(cache=True)
+def grid_gradient(grid, x_m, y_m):
+    """Scalar `Heightfield.gradient`: (dh/dx, dh/dy) of the triangle under (x_m, y_m) on `Heightfield.grid`; NaN in,
+    NaN out."""
+    i, j, fu, fv = _cell(grid, x_m, y_m)
+    if fu != fu:
+        return math.nan, math.nan
+    h00, h10, h01, h11 = _corners(grid, i, j)
+    d = grid[5]
+    if fu + fv <= 1.0:
+        return (h10 - h00) / d, (h01 - h00) / d
+    return (h11 - h01) / d, (h11 - h10) / d
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,34 +156,19 @@ class Heightfield:
         return np.stack([gx, gy], axis=-1)
 
     @cached_property
-    def _scalar_grid(self) -> tuple[list[float], int, int, float, float, float]:
-        """Row-major heights as a Python list (float32 -> float64 exactly), nx, ny, origin [m] and spacing [m]."""
-        ny, nx = self.shape
-        return self.heights_m.ravel().tolist(), nx, ny, self.origin_m[0], self.origin_m[1], self.spacing_m
-
-    @cached_property
     def grid(self) -> tuple[npt.NDArray[np.float32], int, int, float, float, float]:
-        """The compiled queries' arguments: row-major heights (flat, float32), nx, ny, origin x, y [m], spacing [m]."""
+        """The compiled queries' grid: row-major heights (flat, float32), nx, ny, origin x, y [m], spacing [m]."""
         ny, nx = self.shape
         return self.heights_m.ravel(), nx, ny, self.origin_m[0], self.origin_m[1], self.spacing_m
 
     def height_at(self, x_m: float, y_m: float) -> float:
         """Scalar `height_m` [m] (compiled, `grid_height`): the same equations and rounding; NaN -> NaN."""
-        return grid_height(*self.grid, float(x_m), float(y_m))
+        return grid_height(self.grid, float(x_m), float(y_m))
 
     def gradient_at(self, x_m: float, y_m: float) -> tuple[float, float]:
-        """Scalar `gradient`: (dh/dx, dh/dy) of the triangle under (x, y); NaN in, NaN out."""
-        if x_m != x_m or y_m != y_m:
-            return math.nan, math.nan
-        h, nx, ny, ox, oy, d = self._scalar_grid
-        u = min(max((x_m - ox) / d, 0.0), nx - 1.0)
-        v = min(max((y_m - oy) / d, 0.0), ny - 1.0)
-        i, j = min(int(u), nx - 2), min(int(v), ny - 2)
-        k = j * nx + i
-        h00, h10, h01, h11 = h[k], h[k + 1], h[k + nx], h[k + nx + 1]
-        if (u - i) + (v - j) <= 1.0:
-            return (h10 - h00) / d, (h01 - h00) / d
-        return (h11 - h01) / d, (h11 - h10) / d
+        """Scalar `gradient` (compiled, `grid_gradient`): (dh/dx, dh/dy) of the triangle under (x, y); NaN in, NaN
+        out."""
+        return grid_gradient(self.grid, float(x_m), float(y_m))
 
     def slope_deg(self, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> FloatArray:
         """Surface inclination [deg]: atan(|grad h|)."""

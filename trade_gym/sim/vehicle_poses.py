@@ -25,33 +25,32 @@ def pose_at(terrain: Heightfield, v: Vehicle, t_s: float) -> Pose12:
     (`terrain_pose`, compiled)."""
     x, y, c, s = v.motion.planar_pose(t_s)  # heading (c, s) = (cos, sin): the path's tangent unless it swerves
     hx, hy, hz = v.half_extents_m.tolist()
-    return terrain_pose(*terrain.grid, x, y, c, s, hx, hy, hz)
+    return terrain_pose(terrain.grid, x, y, c, s, hx, hy, hz)
 
 
 @njit(cache=True)
-def terrain_pose(h, nx, ny, ox, oy, d, x, y, c, s, hx, hy, hz):
+def terrain_pose(grid, x, y, c, s, hx, hy, hz):
     """Centre (3) and row-major R_world_vehicle (9) of a box of half extents (hx, hy, hz) [m] at (x, y) heading
-    (c, s) = (cos, sin) on the terrain `Heightfield.grid` describes.
+    (c, s) = (cos, sin) on the terrain `grid` (`Heightfield.grid`).
 
     Corners FL, FR, RL, RR at (x, y) +- half_x fwd +- half_y left; slopes along fwd and left from their heights;
     n = (-pitch fwd - roll left, 1) / |.|, x_axis = (fwd, pitch) / |.|, y_axis = n x x_axis, and the
     bottom face's centre on the terrain: centre = (x, y, h(x, y)) + half_z n.
     """
     fx, fy, lx, ly = c * hx, s * hx, -s * hy, c * hy
-    z_fl = grid_height(h, nx, ny, ox, oy, d, x + (fx + lx), y + (fy + ly))
-    z_fr = grid_height(h, nx, ny, ox, oy, d, x + (fx - lx), y + (fy - ly))
-    z_rl = grid_height(h, nx, ny, ox, oy, d, x + (lx - fx), y + (ly - fy))
-    z_rr = grid_height(h, nx, ny, ox, oy, d, x + (-fx - lx), y + (-fy - ly))
+    z_fl = grid_height(grid, x + (fx + lx), y + (fy + ly))
+    z_fr = grid_height(grid, x + (fx - lx), y + (fy - ly))
+    z_rl = grid_height(grid, x + (lx - fx), y + (ly - fy))
+    z_rr = grid_height(grid, x + (-fx - lx), y + (-fy - ly))
     pitch = (z_fl + z_fr - z_rl - z_rr) / (4.0 * hx)  # dz per metre forward
     roll = (z_fl + z_rl - z_fr - z_rr) / (4.0 * hy)  # dz per metre left
-    nx_, ny_ = -pitch * c + roll * s, -pitch * s - roll * c
-    inv = 1.0 / math.sqrt(nx_ * nx_ + ny_ * ny_ + 1.0)
-    nx_, ny_, nz_ = nx_ * inv, ny_ * inv, inv
+    nx, ny = -pitch * c + roll * s, -pitch * s - roll * c
+    inv = 1.0 / math.sqrt(nx * nx + ny * ny + 1.0)
+    nx, ny, nz = nx * inv, ny * inv, inv
     inv = 1.0 / math.sqrt(c * c + s * s + pitch * pitch)
     ax, ay, az = c * inv, s * inv, pitch * inv
-    bx, by, bz = ny_ * az - nz_ * ay, nz_ * ax - nx_ * az, nx_ * ay - ny_ * ax  # n x x_axis
-    z = grid_height(h, nx, ny, ox, oy, d, x, y)
-    return (x + hz * nx_, y + hz * ny_, z + hz * nz_, ax, bx, nx_, ay, by, ny_, az, bz, nz_)
+    bx, by, bz = ny * az - nz * ay, nz * ax - nx * az, nx * ay - ny * ax  # n x x_axis
+    return (x + hz * nx, y + hz * ny, grid_height(grid, x, y) + hz * nz, ax, bx, nx, ay, by, ny, az, bz, nz)
 
 
 def _arrays(pose: Pose12) -> tuple[FloatArray, FloatArray]:
