@@ -28,3 +28,18 @@ def draw_car(image: np.ndarray, centre_px: np.ndarray, scale: float = 1.0) -> np
     panel_y = y0 + (y1 - y0) // 3
     image[panel_y:panel_y + 3, x0 + 2:x1 - 2] = PANEL_RGB
     return np.array([x0, y0, x1 - x0, y1 - y0], dtype=np.float64)
+
+
+
+def draw_turned_car(image: np.ndarray, centre_px: np.ndarray, heading_deg: float) -> np.ndarray:
+    """Draw a car of CAR_WH_PX (no panel) turned by `heading_deg` from the image's y axis, centred at `centre_px`
+    (x, y), into `image` (the pixels whose centres lie on it, so that it keeps its area at any heading); its
+    axis-aligned box (x, y, w, h) [px]."""
+    ys, xs = np.mgrid[:image.shape[0], :image.shape[1]] + 0.5
+    c, s = np.cos(np.radians(heading_deg)), np.sin(np.radians(heading_deg))
+    dx, dy = xs - centre_px[0], ys - centre_px[1]
+    inside = (np.abs(c * dx + s * dy) <= CAR_WH_PX[0] / 2) & (np.abs(-s * dx + c * dy) <= CAR_WH_PX[1] / 2)
+    image[inside] = CAR_RGB
+    rows, cols = np.nonzero(inside)
+    return np.array([cols.min(), rows.min(), cols.max() - cols.min() + 1, rows.max() - rows.min() + 1],
+                    dtype=np.float64)

@@ -19,7 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from trade.geometry import RotationWarp
-from trade.tracking.colour_box import ColourBoxRefiner
+from trade.tracking.colour_box import BoxRefinement, ColourBoxRefiner
 from trade.tracking.dcf import DcfTracker
 from trade.tracking.guided_config import GuidedTrackerConfig, blob_size_tolerance
 from trade.tracking.peaks import PeakChoice, highest_peak, peaks_above, select_peak
@@ -77,6 +77,9 @@ class GuidedTracker:
         # known depth, the last depth jump or the last accepted blob), from which its size is bounded (`_depth_bounded`)
         self._dcf_reference: tuple[float, float] | None = None
         self._previous_depth_m = math.nan  # the last known predicted depth [m] of a tracked frame
+        # the pixel count of the target's blob and the predicted depth [m] it was seen at (NaN: not known): the initial
+        # box's area, then each blob taken as the target's (`_accept_as_target`)
+        self._target_pixels: tuple[float, float] | None = None
         rings = np.arange(-config.reacquire_rings, config.reacquire_rings + 1)
         grid = np.stack(np.meshgrid(rings, rings), axis=-1).reshape(-1, 2).astype(np.float64)
         # (x, y) offsets of the re-detection windows in steps, the centre first
@@ -95,6 +98,7 @@ class GuidedTracker:
         self._measured = (box, math.nan)
         self._dcf_reference = None
         self._previous_depth_m = math.nan
+        self._target_pixels = (box.w_px * box.h_px, math.nan)
         return box
 
     def step(self, image_rgb: ImageRGB, prediction: PixelPrediction,
@@ -310,15 +314,15 @@ class GuidedTracker:
         return bool(np.any(np.abs(np.asarray(predicted_px) - motion_px) > fraction * window))
 
     def _refine_box(self, image_rgb: ImageRGB, dcf_box: BBox, prediction: PixelPrediction, learn: bool) -> BBox:
-        """The output box: the target's colour blob around the DCF centre when that blob is plausible, else a box
-        centred on the DCF location with the last output box's size, or with `size_refused_box_by_depth` sized by
-        depth from the last measured box (`_measured_size`)."""
+        """The output box: the target's colour blob around the DCF centre when the refiner accepts it and it holds the
+        target alone (`_accept_as_target`), else a box centred on the DCF location with the last output box's size,
+        or with `size_refused_box_by_depth` sized by depth from the last measured box (`_measured_size`)."""
         centre = dcf_box.center
         if not self.config.box_refinement:
             return dcf_box
         last = _after_init(self._box)
         refinement = self.refiner.refine(image_rgb, centre, last, size_reference=dcf_box)
-        if refinement is None or not refinement.accepted:
+        if refinement is None or not refinement.accepted or not self._accept_as_target(refinement, prediction):
             w_px, h_px = (self._measured_size(prediction) if self.config.size_refused_box_by_depth
                           else (last.w_px, last.h_px))
             return BBox.from_center(centre[0], centre[1], w_px, h_px)
@@ -326,18 +330,17 @@ class GuidedTracker:
             self.refiner.update(image_rgb, refinement)
         if self.config.size_refused_box_by_depth:
             self._measured = (refinement.box, prediction.depth_m if self._depth_known(prediction) else math.nan)
-        self._bound_by_blob(refinement.box, prediction)
+        self._bound_by_blob(refinement, prediction)
         return refinement.box
 
-    def _bound_by_blob(self, blob: BBox, prediction: PixelPrediction) -> None:
-        """Move the DCF box's centre to the accepted blob's when the blob is no bigger than the DCF box (by area: one
-        target; a blob merged with a look-alike is bigger) (`dcf_centre_from_blob`), and its size (the square root of
-        the area) towards `GuidedTrackerConfig.dcf_size_blob_tolerance` of the blob's by at most one DSST scale step
-        (`dcf_size_from_blob`); with the size on, make this frame the depth bound's reference when its depth is known
-        (the blob has just measured the size the depth bound extrapolates)."""
-        cfg, box = self.config, self.dcf.box
+    def _bound_by_blob(self, refinement: BoxRefinement, prediction: PixelPrediction) -> None:
+        """Move the DCF box's centre to the target's blob's (`dcf_centre_from_blob`), and its size (the square root of
+        the area) towards `GuidedTrackerConfig.dcf_size_blob_tolerance` of the blob box's by at most one DSST scale
+        step (`dcf_size_from_blob`); with the size on, make this frame the depth bound's reference when its depth is
+        known (the blob has just measured the size the depth bound extrapolates)."""
+        cfg, box, blob = self.config, self.dcf.box, refinement.box
         size_px, blob_px = math.sqrt(box.w_px * box.h_px), math.sqrt(blob.w_px * blob.h_px)
-        recentre = cfg.dcf_centre_from_blob and blob_px <= size_px
+        recentre = cfg.dcf_centre_from_blob
         bounded_px = size_px
         if cfg.dcf_size_from_blob:
             step = self.dcf.config.scale.scale_step  # from the components in use: they may be injected
@@ -348,6 +351,21 @@ class GuidedTracker:
             box = self.dcf.commit(blob.center if recentre else box.center, bounded_px / size_px)
         if cfg.dcf_size_from_blob and self._depth_known(prediction):
             self._dcf_reference = (box.w_px, prediction.depth_m)
+
+    def _accept_as_target(self, refinement: BoxRefinement, prediction: PixelPrediction) -> bool:
+        """Whether a blob the refiner accepted holds the target alone (`GuidedTrackerConfig.blob_max_pixel_ratio`),
+        and if so make it the target's: its pixel count is at most that many times the target's last blob's (scaled
+        by the square of the ratio of that blob's depth to the predicted one when both are known), or at most the DCF
+        box's area."""
+        pixels, depth_m = _after_init(self._target_pixels)
+        if self._depth_known(prediction) and not math.isnan(depth_m):
+            pixels *= (depth_m / prediction.depth_m) ** 2
+        box = self.dcf.box
+        if refinement.area_px > self.config.blob_max_pixel_ratio * pixels and refinement.area_px > box.w_px * box.h_px:
+            return False
+        depth_now_m = prediction.depth_m if self._depth_known(prediction) else math.nan
+        self._target_pixels = (float(refinement.area_px), depth_now_m)
+        return True
 
     def _measured_size(self, prediction: PixelPrediction) -> tuple[float, float]:
         """(w, h) [px] of a frame whose blob the refiner refused (`GuidedTrackerConfig.size_refused_box_by_depth`
