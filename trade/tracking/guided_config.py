@@ -134,18 +134,18 @@ class GuidedTrackerConfig:
     randomised looks: the DCF centre stayed at 101 px while the blob moved from 97 to 92 px, lost at frame 17). Only
     the target's blob moves it (`blob_max_pixel_ratio`)."""
     blob_max_pixel_ratio: float = 1.4
-    """A blob the colour refiner accepts is the target's (the output box, the DCF's centre and size bound, the colour
-    model's update) only while its pixel count is at most this many times the target's last blob's (the initial box's
-    area at first; scaled by the square of the depth ratio when both depths are known), or at most the DCF box's
-    area; otherwise it is handled as a refused one. A blob merged with an identical car has about twice the pixels
-    (2.4 times at the merge on desert training world 10200, evasive), and had pulled the DCF box half-way onto the
-    car, then grown it over both (the size bound), until the DCF followed the car; one target's count changed by at
-    most 14 % from frame to frame (desert training world 10204, a swerving car). The refiner's own fill test is
-    relative to the DCF box, which one target filled 0.45-1.35 of (desert and city training worlds) and a merged blob
-    as little as 0.66 once that box had grown towards it. Nor the blob box's area: a swerving car's axis-aligned box grows with its
-    heading (1.6 times at 13 deg for a car 2.3 times as long as wide) while the DCF box follows by one scale step a
-    frame, and a test on it stopped the DCF's re-centring exactly on an evasive target (desert training world 10204).
-    inf: every accepted blob is the target's."""
+    """A blob the colour refiner accepts is the target's (the output box, the DCF's centre and size bound, the
+    colour model's update) only while its pixel count is at most this many times the target's last blob's (the
+    initial box's area at first; scaled by the square of the depth ratio when both depths are known), or at most the
+    DCF box's area; otherwise it is handled as a refused one. A blob merged with an identical car has about twice
+    the pixels (2.4 times at the merge on desert training world 10200, evasive): taken, it covered both cars, the
+    size bound grew the DCF box towards them, and re-centring on it pulled the DCF half-way onto the car; one
+    target's count changed by at most 14 % from frame to frame (desert training world 10204, a swerving car). The
+    refiner's own fill test is relative to the DCF box, which one target filled 0.45-1.35 of (desert and city
+    training worlds) and a merged blob as little as 0.66 once that box had grown towards it. Nor the blob box's
+    area: a swerving car's axis-aligned box grows with its heading (1.6 times at 13 deg for a car 2.3 times as long
+    as wide) while the DCF box follows by one scale step a frame, and a test on it stopped the DCF's re-centring
+    exactly on an evasive target (desert training world 10204). inf: every accepted blob is the target's."""
     dcf_reference_max_depth_step: float = 0.02
     """A predicted depth that differs from the last tracked frame's by more than this fraction is a new 3D estimate
     (a wrong first fix replaced, a filter converging), not motion, and makes this frame the reference of
