@@ -6,6 +6,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from trade.types import BBox
+
 IMAGE_PX = 128
 GROUND_PX = 256  # the textured ground the camera's view is cropped from
 GROUND_CELL_PX = 4  # texture cells, blurred: detail for the DCF, but no edges as sharp as a car's
@@ -43,3 +45,8 @@ def draw_turned_car(image: np.ndarray, centre_px: np.ndarray, heading_deg: float
     rows, cols = np.nonzero(inside)
     return np.array([cols.min(), rows.min(), cols.max() - cols.min() + 1, rows.max() - rows.min() + 1],
                     dtype=np.float64)
+
+
+def area_side(box: BBox) -> float:
+    """The square root of a box's area [px]: the size a DCF's scale tracks."""
+    return float(np.sqrt(box.w_px * box.h_px))

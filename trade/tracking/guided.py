@@ -329,26 +329,25 @@ class GuidedTracker:
         if learn:
             self.refiner.update(image_rgb, refinement)
         if self.config.size_refused_box_by_depth:
-            self._measured = (refinement.box, prediction.depth_m if self._depth_known(prediction) else math.nan)
-        self._bound_by_blob(refinement, prediction)
+            self._measured = (refinement.box, self._known_depth_m(prediction))
+        self._bound_by_blob(refinement.box, prediction)
         return refinement.box
 
-    def _bound_by_blob(self, refinement: BoxRefinement, prediction: PixelPrediction) -> None:
+    def _bound_by_blob(self, blob: BBox, prediction: PixelPrediction) -> None:
         """Move the DCF box's centre to the target's blob's (`dcf_centre_from_blob`), and its size (the square root of
         the area) towards `GuidedTrackerConfig.dcf_size_blob_tolerance` of the blob box's by at most one DSST scale
         step (`dcf_size_from_blob`); with the size on, make this frame the depth bound's reference when its depth is
         known (the blob has just measured the size the depth bound extrapolates)."""
-        cfg, box, blob = self.config, self.dcf.box, refinement.box
+        cfg, box = self.config, self.dcf.box
         size_px, blob_px = math.sqrt(box.w_px * box.h_px), math.sqrt(blob.w_px * blob.h_px)
-        recentre = cfg.dcf_centre_from_blob
         bounded_px = size_px
         if cfg.dcf_size_from_blob:
             step = self.dcf.config.scale.scale_step  # from the components in use: they may be injected
             tolerance = blob_size_tolerance(self.refiner.config.max_blob_fill_ratio, step)
             bounded_px = min(max(size_px, blob_px / tolerance), blob_px * tolerance)
             bounded_px = min(max(bounded_px, size_px / step), size_px * step)
-        if recentre or bounded_px != size_px:
-            box = self.dcf.commit(blob.center if recentre else box.center, bounded_px / size_px)
+        if cfg.dcf_centre_from_blob or bounded_px != size_px:
+            box = self.dcf.commit(blob.center if cfg.dcf_centre_from_blob else box.center, bounded_px / size_px)
         if cfg.dcf_size_from_blob and self._depth_known(prediction):
             self._dcf_reference = (box.w_px, prediction.depth_m)
 
@@ -363,9 +362,12 @@ class GuidedTracker:
         box = self.dcf.box
         if refinement.area_px > self.config.blob_max_pixel_ratio * pixels and refinement.area_px > box.w_px * box.h_px:
             return False
-        depth_now_m = prediction.depth_m if self._depth_known(prediction) else math.nan
-        self._target_pixels = (float(refinement.area_px), depth_now_m)
+        self._target_pixels = (float(refinement.area_px), self._known_depth_m(prediction))
         return True
+
+    def _known_depth_m(self, prediction: PixelPrediction) -> float:
+        """The prediction's depth [m] when known (`_depth_known`), else NaN: the depth a measured size is tagged with."""
+        return prediction.depth_m if self._depth_known(prediction) else math.nan
 
     def _measured_size(self, prediction: PixelPrediction) -> tuple[float, float]:
         """(w, h) [px] of a frame whose blob the refiner refused (`GuidedTrackerConfig.size_refused_box_by_depth`
