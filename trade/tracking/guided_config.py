@@ -146,6 +146,13 @@ class GuidedTrackerConfig:
     area: a swerving car's axis-aligned box grows with its heading (1.6 times at 13 deg for a car 2.3 times as long
     as wide) while the DCF box follows by one scale step a frame, and a test on it stopped the DCF's re-centring
     exactly on an evasive target (desert training world 10204). inf: every accepted blob is the target's."""
+    blob_max_box_area_ratio: float = 1.5
+    """Beside `blob_max_pixel_ratio`, a blob is the target's only while its box's area is at most this many times
+    that of the target's last blob (with the same depth scaling and the same exception: at most the DCF box's area in
+    pixels). An identical car that joins the target's blob at an angle adds few pixels but widens the box: 1.2 times
+    the pixels and 1.76 times the box area in one frame (desert training world 10200, evasive, randomised looks,
+    where the DCF followed the merged blob), while one swerving target's box grew at most 1.33 times a frame (desert
+    training world 10204, evasive). inf: off."""
     dcf_reference_max_depth_step: float = 0.02
     """A predicted depth that differs from the last tracked frame's by more than this fraction is a new 3D estimate
     (a wrong first fix replaced, a filter converging), not motion, and makes this frame the reference of
@@ -174,6 +181,7 @@ class GuidedTrackerConfig:
             "dcf_reference_max_depth_step": (self.dcf_reference_max_depth_step > 0,
                                              "> 0 (inf: the first fix only)"),
             "blob_max_pixel_ratio": (self.blob_max_pixel_ratio >= 1.0, ">= 1 (inf: off)"),  # NaN fails
+            "blob_max_box_area_ratio": (self.blob_max_box_area_ratio >= 1.0, ">= 1 (inf: off)"),  # NaN fails
             **{name: (0.0 < getattr(self, name) < math.inf, "finite and > 0")
                for name in ("second_window_offset_fraction", "reacquire_step_fraction", "coast_scale_max_relative_sigma")},
         }

@@ -373,7 +373,8 @@ def test_the_camera_turn_carries_the_boxes_and_is_not_taken_for_image_velocity(s
                                           ("coast_scale_max_relative_sigma", -0.1),
                                           ("dcf_size_depth_tolerance", 0.9), ("dcf_size_depth_tolerance", np.nan),
                                           ("dcf_reference_max_depth_step", 0.0), ("blob_max_pixel_ratio", 0.9),
-                                          ("blob_max_pixel_ratio", np.nan)])
+                                          ("blob_max_pixel_ratio", np.nan), ("blob_max_box_area_ratio", 0.9),
+                                          ("blob_max_box_area_ratio", np.nan)])
 def test_config_rejects_bad_reacquisition_and_snap_settings(field, value):
     with pytest.raises(ValueError, match=f"GuidedTrackerConfig.{field} .*got {value!r}"):
         GuidedTrackerConfig(**{field: value})

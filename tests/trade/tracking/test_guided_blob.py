@@ -3,6 +3,7 @@ swerving car, a lagging DCF), and a blob merged with a look-alike is not the tar
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -18,36 +19,88 @@ from tests.trade.car_scene import IMAGE_PX, area_side, draw_car, draw_turned_car
 
 
 class _MergedPixelsRefiner(ColourBoxRefiner):
-    """A refiner that accepts, as the target's blob, the car and a look-alike touching it on its right: twice its
-    width and twice its pixels."""
+    """A refiner that accepts, as the target's blob, the car and a look-alike touching it on its right: `width`
+    times the car's box width and `pixels` times its pixels (twice both by default), from its `clean_calls`+1-th call
+    on (the car alone before)."""
+
+    def __init__(self, width: float = 2.0, pixels: float = 2.0, clean_calls: int = 0) -> None:
+        super().__init__()
+        self.width, self.pixels, self.clean_calls = width, pixels, clean_calls
 
     def refine(self, *args, **kwargs) -> BoxRefinement | None:
         refinement = super().refine(*args, **kwargs)
-        if refinement is None:
-            return None
+        self.clean_calls -= 1
+        if refinement is None or self.clean_calls >= 0:
+            return refinement
         box = refinement.box
-        return replace(refinement, box=BBox(box.x_px, box.y_px, 2.0 * box.w_px, box.h_px),
-                       area_px=2 * refinement.area_px, accepted=True, rejection="")
+        return replace(refinement, box=BBox(box.x_px, box.y_px, self.width * box.w_px, box.h_px),
+                       area_px=round(self.pixels * refinement.area_px), accepted=True, rejection="")
+
+
+MERGED_RUN_FRAMES = 5
+
+
+def _merged_run(config: GuidedTrackerConfig, refiner: ColourBoxRefiner,
+                scale: float = 1.0) -> tuple[DcfTracker, list[BBox], np.ndarray]:
+    """The car (`draw_car`'s `scale`) standing at the image centre for MERGED_RUN_FRAMES frames under `refiner`: the DCF, the
+    output boxes and the car's drawn box."""
+    ground, centre_px = textured_ground()[:IMAGE_PX, :IMAGE_PX], np.full(2, IMAGE_PX / 2)
+    dcf = DcfTracker(DcfConfig(estimate_scale=False))
+    tracker = GuidedTracker(config, dcf=dcf, refiner=refiner)
+    image = ground.copy()
+    gt = draw_car(image, centre_px, scale)
+    tracker.init(image, BBox.from_array(gt))
+    boxes = []
+    for _ in range(MERGED_RUN_FRAMES):
+        image = ground.copy()
+        draw_car(image, centre_px, scale)
+        frame = tracker.step(image, PixelPrediction.none())
+        assert frame.tracked
+        boxes.append(frame.box)
+    return dcf, boxes, gt
 
 
 def test_a_blob_merged_with_a_look_alike_is_not_the_target_s():
     """Blobs of the car and a look-alike beside it (twice the car's pixels), which the refiner accepts: they are
     handled as refused, so the output box keeps the car's size at the DCF's location, and the DCF box stays on the
     car with its size instead of moving half-way to the look-alike and growing over both."""
-    ground, centre_px = textured_ground()[:IMAGE_PX, :IMAGE_PX], np.full(2, IMAGE_PX / 2)
-    dcf = DcfTracker(DcfConfig(estimate_scale=False))
-    tracker = GuidedTracker(GuidedTrackerConfig(), dcf=dcf, refiner=_MergedPixelsRefiner())
-    image = ground.copy()
-    gt = draw_car(image, centre_px)
-    tracker.init(image, BBox.from_array(gt))
-    first_px = area_side(dcf.box)
-    for _ in range(3):
-        image = ground.copy()
-        draw_car(image, centre_px)
-        frame = tracker.step(image, PixelPrediction.none())
-        assert frame.tracked and iou(frame.box.as_array(), gt) > 0.8, frame.box
-        assert np.linalg.norm(dcf.box.center - centre_px) <= 1.0, dcf.box.center
-        assert area_side(dcf.box) == pytest.approx(first_px)
+    dcf, boxes, gt = _merged_run(GuidedTrackerConfig(), _MergedPixelsRefiner())
+    assert all(iou(box.as_array(), gt) > 0.8 for box in boxes), boxes
+    assert np.linalg.norm(dcf.box.center - BBox.from_array(gt).center) <= 1.0, dcf.box.center
+    assert area_side(dcf.box) == pytest.approx(area_side(BBox.from_array(gt)))
+
+
+MERGE_CAR_SCALE = 2.0
+
+
+@pytest.mark.parametrize("box_area_ratio", [GuidedTrackerConfig().blob_max_box_area_ratio, np.inf])
+def test_a_partial_merge_is_caught_by_its_box_area(box_area_ratio):
+    """A look-alike joining the car's blob at an angle: 1.2 times its pixels (under `blob_max_pixel_ratio`, and more
+    than the DCF box's area) but 1.76 times its box width, as at the partial merge on desert training world 10200.
+    With `blob_max_box_area_ratio` the blob is handled as refused and the DCF stays on the car; with the bound off
+    the DCF is re-centred half-way to the look-alike."""
+    config = GuidedTrackerConfig(blob_max_box_area_ratio=box_area_ratio)
+    refiner = _MergedPixelsRefiner(width=1.76, pixels=1.2, clean_calls=2)  # the box bound's reference: the car's blob
+    dcf, boxes, gt = _merged_run(config, refiner, MERGE_CAR_SCALE)
+    car = BBox.from_array(gt)
+    assert config.blob_max_pixel_ratio > 1.2 and 1.2 * _car_pixels(gt, MERGE_CAR_SCALE) > car.w_px * car.h_px
+    offset_px = float(np.linalg.norm(dcf.box.center - car.center))
+    assert refiner.clean_calls < 0  # the merge was seen
+    if math.isfinite(box_area_ratio):
+        assert offset_px <= 1.0 and all(iou(box.as_array(), gt) > 0.8 for box in boxes), (offset_px, boxes)
+    else:
+        assert offset_px > 0.3 * car.w_px, offset_px
+
+
+def _car_pixels(gt: np.ndarray, scale: float) -> float:
+    """The pixel count of the car drawn in `gt` at `scale` (the refiner's blob of it)."""
+    image = textured_ground()[:IMAGE_PX, :IMAGE_PX].copy()
+    draw_car(image, np.full(2, IMAGE_PX / 2), scale)
+    refiner = ColourBoxRefiner()
+    refiner.init(image, BBox.from_array(gt))
+    refinement = refiner.refine(image, BBox.from_array(gt).center, BBox.from_array(gt))
+    assert refinement is not None
+    return float(refinement.area_px)
 
 
 class _LaggingDcf(DcfTracker):
