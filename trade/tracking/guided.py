@@ -82,10 +82,10 @@ class GuidedTracker:
         # known depth, the last depth jump or the last accepted blob), from which its size is bounded (`_depth_bounded`)
         self._dcf_reference: tuple[float, float] | None = None
         self._previous_depth_m = math.nan  # the last known predicted depth [m] of a tracked frame
-        # the pixel count and box (w, h) [px] of the target's blob and the predicted depth [m] it was seen at (NaN: not
-        # known): the initial box's area and no box (NaN: the initial box is not a blob's box), then each blob taken as
-        # the target's (`_accept_as_target`)
-        self._target_blob: tuple[float, tuple[float, float], float] | None = None
+        # the pixel count and box of the target's blob and the predicted depth [m] it was seen at (NaN: not known): the
+        # initial box's area and no box (the initial box is not a blob's), then each blob taken as the target's
+        # (`_accept_as_target`)
+        self._target_blob: tuple[float, BBox | None, float] | None = None
         rings = np.arange(-config.reacquire_rings, config.reacquire_rings + 1)
         grid = np.stack(np.meshgrid(rings, rings), axis=-1).reshape(-1, 2).astype(np.float64)
         # (x, y) offsets of the re-detection windows in steps, the centre first
@@ -104,7 +104,7 @@ class GuidedTracker:
         self._measured = (box, math.nan)
         self._dcf_reference = None
         self._previous_depth_m = math.nan
-        self._target_blob = (box.w_px * box.h_px, (math.nan, math.nan), math.nan)
+        self._target_blob = (box.w_px * box.h_px, None, math.nan)
         return box
 
     def step(self, image_rgb: ImageRGB, prediction: PixelPrediction,
@@ -363,17 +363,18 @@ class GuidedTracker:
         most `blob_max_box_area_ratio` times that of the last blob's box grown by `BOX_SIDE_QUANTUM_PX` a side (both
         scaled by the ratio of that blob's depth to the predicted one when both are known), or its pixel count is at
         most the DCF box's area."""
-        pixels, (w_px, h_px), depth_m = _after_init(self._target_blob)
+        pixels, last, depth_m = _after_init(self._target_blob)
+        scale = 1.0  # apparent size ~ 1 / depth
         if self._depth_known(prediction) and not math.isnan(depth_m):
             scale = depth_m / prediction.depth_m
-            pixels, w_px, h_px = pixels * scale ** 2, w_px * scale, h_px * scale
         cfg, dcf_box, blob = self.config, self.dcf.box, refinement.box
-        box_area_px = (w_px + BOX_SIDE_QUANTUM_PX) * (h_px + BOX_SIDE_QUANTUM_PX)
-        grown = (refinement.area_px > cfg.blob_max_pixel_ratio * pixels
-                 or blob.w_px * blob.h_px > cfg.blob_max_box_area_ratio * box_area_px)
+        grown = refinement.area_px > cfg.blob_max_pixel_ratio * (pixels * scale ** 2)
+        if last is not None:
+            last_area_px = (last.w_px * scale + BOX_SIDE_QUANTUM_PX) * (last.h_px * scale + BOX_SIDE_QUANTUM_PX)
+            grown = grown or blob.w_px * blob.h_px > cfg.blob_max_box_area_ratio * last_area_px
         if grown and refinement.area_px > dcf_box.w_px * dcf_box.h_px:
             return False
-        self._target_blob = (float(refinement.area_px), (blob.w_px, blob.h_px), self._known_depth_m(prediction))
+        self._target_blob = (float(refinement.area_px), blob, self._known_depth_m(prediction))
         return True
 
     def _known_depth_m(self, prediction: PixelPrediction) -> float:

@@ -148,8 +148,9 @@ class GuidedTrackerConfig:
     exactly on an evasive target (desert training world 10204). inf: every accepted blob is the target's."""
     blob_max_box_area_ratio: float = 1.5
     """Beside `blob_max_pixel_ratio`, a blob is the target's only while its box's area is at most this many times
-    that of the target's last blob (with the same depth scaling and the same exception: at most the DCF box's area in
-    pixels). An identical car that joins the target's blob at an angle adds few pixels but widens the box: 1.2 times
+    that of the target's last blob's box grown by a pixel a side (`trade.tracking.guided.BOX_SIDE_QUANTUM_PX`), with
+    the same depth scaling and the same exception (its pixels at most the DCF box's area); there is no reference
+    before the first blob taken, as the initial box is not a blob's box. An identical car that joins the target's blob at an angle adds few pixels but widens the box: 1.2 times
     the pixels and 1.76 times the box area in one frame (desert training world 10200, evasive, randomised looks,
     where the DCF followed the merged blob), while one swerving target's box grew at most 1.33 times a frame (desert
     training world 10204, evasive). inf: off."""
