@@ -21,16 +21,20 @@ from tests.trade.car_scene import IMAGE_PX, area_side, draw_car, draw_turned_car
 class _MergedPixelsRefiner(ColourBoxRefiner):
     """A refiner that accepts, as the target's blob, the car and a look-alike touching it on its right: `width`
     times the car's box width and `pixels` times its pixels (twice both by default), from its `clean_calls`+1-th call
-    on (the car alone before)."""
+    on (the car alone before: `car_area_px` is its blob's pixel count)."""
 
     def __init__(self, width: float = 2.0, pixels: float = 2.0, clean_calls: int = 0) -> None:
         super().__init__()
         self.width, self.pixels, self.clean_calls = width, pixels, clean_calls
+        self.car_area_px = 0
 
     def refine(self, *args, **kwargs) -> BoxRefinement | None:
         refinement = super().refine(*args, **kwargs)
         self.clean_calls -= 1
-        if refinement is None or self.clean_calls >= 0:
+        if refinement is None:
+            return None
+        self.car_area_px = refinement.area_px
+        if self.clean_calls >= 0:
             return refinement
         box = refinement.box
         return replace(refinement, box=BBox(box.x_px, box.y_px, self.width * box.w_px, box.h_px),
@@ -83,24 +87,13 @@ def test_a_partial_merge_is_caught_by_its_box_area(box_area_ratio):
     refiner = _MergedPixelsRefiner(width=1.76, pixels=1.2, clean_calls=2)  # the box bound's reference: the car's blob
     dcf, boxes, gt = _merged_run(config, refiner, MERGE_CAR_SCALE)
     car = BBox.from_array(gt)
-    assert config.blob_max_pixel_ratio > 1.2 and 1.2 * _car_pixels(gt, MERGE_CAR_SCALE) > car.w_px * car.h_px
+    assert config.blob_max_pixel_ratio > 1.2 and 1.2 * refiner.car_area_px > car.w_px * car.h_px
     offset_px = float(np.linalg.norm(dcf.box.center - car.center))
     assert refiner.clean_calls < 0  # the merge was seen
     if math.isfinite(box_area_ratio):
         assert offset_px <= 1.0 and all(iou(box.as_array(), gt) > 0.8 for box in boxes), (offset_px, boxes)
     else:
         assert offset_px > 0.3 * car.w_px, offset_px
-
-
-def _car_pixels(gt: np.ndarray, scale: float) -> float:
-    """The pixel count of the car drawn in `gt` at `scale` (the refiner's blob of it)."""
-    image = textured_ground()[:IMAGE_PX, :IMAGE_PX].copy()
-    draw_car(image, np.full(2, IMAGE_PX / 2), scale)
-    refiner = ColourBoxRefiner()
-    refiner.init(image, BBox.from_array(gt))
-    refinement = refiner.refine(image, BBox.from_array(gt).center, BBox.from_array(gt))
-    assert refinement is not None
-    return float(refinement.area_px)
 
 
 class _LaggingDcf(DcfTracker):
