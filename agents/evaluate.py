@@ -53,10 +53,7 @@ def evaluate(model: Path, sha256: str, scenes: Sequence[str], worlds: Sequence[i
         env = TradeFollowEnv(scene=scene, episode_duration_s=steps / CAMERA_RATE_HZ, **env_kwargs)
         try:
             followers: dict[str, Callable[[], ScriptedFollower | LearnedFollower]] = {
-                "scripted": lambda: ScriptedFollower(ScriptedFollowerConfig(
-                    camera_pitch_deg=env.config.camera_pitch_deg,
-                    max_speed_horizontal_mps=env.action_scale.horizontal_mps,
-                    max_speed_vertical_mps=env.action_scale.vertical_mps)),
+                "scripted": lambda: ScriptedFollower(ScriptedFollowerConfig.of(env.config, env.action_scale)),
                 "learned": lambda: LearnedFollower(model, expected_sha256=sha256)}
             runs = {name: [episode_scores(fly_episode(env, make(), w, steps)) for w in worlds]
                     for name, make in followers.items()}

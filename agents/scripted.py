@@ -12,45 +12,68 @@ from typing import Any
 
 import numpy as np
 
-from trade.validation import require
-from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, DEFAULT_ACTION_SCALE
-from trade_gym.config import CAMERA_PITCH_RANGE_DEG, CAMERA_RATE_HZ, EnvConfig
+from trade.validation import is_finite_number, is_positive_number, require
+from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, DEFAULT_ACTION_SCALE, ActionScale
+from trade_gym.agents.image_servo import attitude_after, box_ground_offset
+from trade_gym.config import CAMERA_FOV_RANGE_DEG, CAMERA_PITCH_RANGE_DEG, CAMERA_RATE_HZ, EnvConfig
+from trade_gym.observation import IMU_GYRO_COLUMNS
 
+HANDED_OVER_FRAMES = 2 ** 62  # `ScriptedFollower._fixed_frames` of an episode with no servo to hand over from
 
 
 @dataclass(frozen=True)
 class ScriptedFollowerConfig:
-    """Gains [1/s], feed-forward fraction, camera pitch [deg] and the env's action scale."""
+    """Gains, feed-forward fraction, the hand-over time [s], the camera's pitch and field of view [deg] and the env's
+    action scale; `ScriptedFollowerConfig.of(env_config, action_scale)` reads the env's."""
 
     position_gain_per_s: float = 0.8
     # Before a 3D estimate exists the follower servos the box to the image centre (`_servo_image`): a PI law,
-    # speed = -(image_gain_mps e + image_integral_gain_mps_per_s integral(e dt)), e the box centre's offset in
-    # half-image units, whose setpoint changes by at most image_max_accel_mps2 per second. Set on training worlds
-    # 10200-10204 (breadth-tuning): a proportional law at 6 m/s lagged a starting stop-and-go or evasive target out of
-    # the following band before the first 3D fix; at 18 m/s without the limit its sudden tilts lost the DCF
-    # baseline's target (benchmarks/results/breadth_tuning_image_gain.json); the integral removes the lag at a
-    # constant target speed, so the proportional gain and the acceleration stay low enough for the DCF.
-    image_gain_mps: float = 10.0
-    image_integral_gain_mps_per_s: float = 4.0
-    image_max_accel_mps2: float = 4.0
+    # speed = servo_gain_mps e + servo_integral_gain_mps_per_s integral(e dt), e the (forward, left) offset per metre
+    # of height on level ground from the optical axis to the box centre's ray, the drone's tilt taken out
+    # (`trade_gym.agents.image_servo`); its setpoint changes by at most servo_max_accel_mps2 per second (inf: the
+    # drone's own acceleration limit alone). Set on training worlds 10200-10204 (breadth-tuning,
+    # benchmarks/results/breadth_tuning_image_servo_tilt.json): 12.6 and 8.4 are 18 and 12 per half-image of the 110
+    # deg camera (tan 55 deg = 1.43 units), which caught a stop-and-go target starting at twice the scene's speed
+    # before it left the desert's band; without the limit the step from hover tilted the camera in one frame and the
+    # DCF baseline lost its city target at once, at 12 m/s^2 it did not.
+    servo_gain_mps: float = 12.6
+    servo_integral_gain_mps_per_s: float = 8.4
+    servo_max_accel_mps2: float = 12.0
+    # From the first 3D estimate the 3D law's velocity feed-forward blends linearly from the servo's integral (its
+    # estimate of the target's velocity) to the estimate's velocity over handover_s (0: at once): the trajectory
+    # model's first velocity is zero, and with it the 3D law braked a drone the servo had flying after the target.
+    handover_s: float = 1.0
     height_gain_per_s: float = 0.6
     velocity_feedforward: float = 1.0
     camera_pitch_deg: float = EnvConfig.camera_pitch_deg  # must match the env's
+    camera_fov_deg: float = EnvConfig.camera_fov_deg  # must match the env's
     # the env's action scale (`env.action_scale`) [m/s per unit action]
     max_speed_horizontal_mps: float = DEFAULT_ACTION_SCALE.horizontal_mps
     max_speed_vertical_mps: float = DEFAULT_ACTION_SCALE.vertical_mps
 
     def __post_init__(self) -> None:
-        for name in ("position_gain_per_s", "height_gain_per_s", "image_gain_mps", "max_speed_horizontal_mps",
-                     "max_speed_vertical_mps", "image_max_accel_mps2"):
-            value = getattr(self, name)
-            require(value == math.inf and name == "image_max_accel_mps2" or np.isfinite(value) and value > 0,
-                    f"ScriptedFollowerConfig.{name}", value, "> 0")
-        require(np.isfinite(self.image_integral_gain_mps_per_s) and self.image_integral_gain_mps_per_s >= 0,
-                "ScriptedFollowerConfig.image_integral_gain_mps_per_s", self.image_integral_gain_mps_per_s, ">= 0")
+        c = "ScriptedFollowerConfig"
+        for name in ("position_gain_per_s", "height_gain_per_s", "servo_gain_mps", "max_speed_horizontal_mps",
+                     "max_speed_vertical_mps"):
+            require(is_positive_number(getattr(self, name)), f"{c}.{name}", getattr(self, name), "a finite number > 0")
+        for name in ("servo_integral_gain_mps_per_s", "handover_s"):
+            require(is_finite_number(getattr(self, name)) and getattr(self, name) >= 0.0, f"{c}.{name}",
+                    getattr(self, name), "a finite number >= 0")
+        require(self.servo_max_accel_mps2 == math.inf or is_positive_number(self.servo_max_accel_mps2),
+                f"{c}.servo_max_accel_mps2", self.servo_max_accel_mps2, "> 0 (inf: no limit)")
         low, high = CAMERA_PITCH_RANGE_DEG
-        require(low <= self.camera_pitch_deg <= high, "ScriptedFollowerConfig.camera_pitch_deg", self.camera_pitch_deg,
+        require(low <= self.camera_pitch_deg <= high, f"{c}.camera_pitch_deg", self.camera_pitch_deg,
                 f"in [{low}, {high}] (the env's range)")
+        low, high = CAMERA_FOV_RANGE_DEG
+        require(is_finite_number(self.camera_fov_deg) and low <= self.camera_fov_deg <= high, f"{c}.camera_fov_deg",
+                self.camera_fov_deg, f"in [{low}, {high}] (the env's range)")
+
+    @classmethod
+    def of(cls, config: EnvConfig, action_scale: ActionScale) -> ScriptedFollowerConfig:
+        """The defaults with the camera and action scale of an env built with `config` (`env.action_scale`)."""
+        return cls(camera_pitch_deg=config.camera_pitch_deg, camera_fov_deg=config.camera_fov_deg,
+                   max_speed_horizontal_mps=action_scale.horizontal_mps,
+                   max_speed_vertical_mps=action_scale.vertical_mps)
 
 
 def target_inputs(observation: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
@@ -63,17 +86,29 @@ def target_inputs(observation: dict[str, np.ndarray]) -> tuple[np.ndarray, np.nd
     return rel.reshape(-1, 3), vel, bbox, batched
 
 
+def body_rates(observation: dict[str, np.ndarray], n: int) -> np.ndarray:
+    """(n, 3) the IMU's mean angular rate over the frame [rad/s] (body x forward, y left, z up); zeros for an
+    observation without "imu" (a hand-built one: the drone is then taken as level)."""
+    if "imu" not in observation:
+        return np.zeros((n, 3))
+    return np.asarray(observation["imu"], dtype=np.float64).reshape(n, -1)[:, IMU_GYRO_COLUMNS]
+
+
 class ScriptedFollower:
-    """`predict(obs) -> (action, state)`; works on one observation or a batch (leading axis)."""
+    """`predict(obs) -> (action, state)`; works on one observation or a batch (leading axis). Per env of a batch,
+    `episode_start` True (and every env on the first call, after `reset()` or when the batch size changes) starts an
+    episode: level, without a height to hold, a servo state or a 3D estimate."""
 
     def __init__(self, config: ScriptedFollowerConfig | None = None) -> None:
         self.config = config or ScriptedFollowerConfig()
         self._hold_height_m: np.ndarray | None = None
         self._servo_state: np.ndarray | None = None  # (n, 4): the image servo's integral (2) and last setpoint (2)
+        self._attitude: np.ndarray | None = None  # (n, 3, 3): R_heading_body from the gyro since the episode start
+        # (n,): frames since the episode's first 3D estimate; -1 before it; HANDED_OVER_FRAMES without a servo before
+        self._fixed_frames: np.ndarray | None = None
 
     def reset(self) -> None:
-        self._hold_height_m = None
-        self._servo_state = None
+        self._hold_height_m = self._servo_state = self._attitude = self._fixed_frames = None
 
     def predict(
         self,
@@ -84,43 +119,73 @@ class ScriptedFollower:
     ) -> tuple[np.ndarray, Any]:
         rel, vel, bbox, batched = target_inputs(observation)
         valid_ever = np.any(rel != 0.0, axis=1)
-        height = -rel[:, 2]  # drone height above the target [m]
-        n = len(rel)
-        if self._hold_height_m is None or self._servo_state is None or len(self._hold_height_m) != n:
-            self._hold_height_m = np.full(n, np.nan)
-            self._servo_state = np.zeros((n, 4))
-        if episode_start is not None:
-            starts = np.asarray(episode_start, bool).reshape(-1)
-            self._hold_height_m = np.where(starts, np.nan, self._hold_height_m)
-            self._servo_state[starts] = 0.0
+        self._start_episodes(len(rel), episode_start)
+        assert self._hold_height_m is not None and self._servo_state is not None  # set by _start_episodes
+        assert self._attitude is not None and self._fixed_frames is not None
+        rates = body_rates(observation, len(rel))
         # The first valid estimate of an episode fixes the height to hold.
-        unset = np.isnan(self._hold_height_m) & valid_ever
-        self._hold_height_m = np.where(unset, height, self._hold_height_m)
-        action = np.stack([
-            self._act(rel[i], vel[i], self._hold_height_m[i]) if valid_ever[i]
-            else self._servo_image(bbox[i], self._servo_state[i])
-            for i in range(len(rel))
-        ]).astype(np.float32)
+        self._hold_height_m = np.where(np.isnan(self._hold_height_m) & valid_ever, -rel[:, 2], self._hold_height_m)
+        # an episode whose first frame has a 3D estimate has no servo to hand over from (e.g. oracle perception)
+        first = valid_ever & (self._fixed_frames < 0)
+        unservoed = first & ~np.any(self._servo_state, axis=1)
+        self._fixed_frames = np.where(unservoed, HANDED_OVER_FRAMES, self._fixed_frames + valid_ever)
+        actions = []
+        for i in range(len(rel)):
+            self._attitude[i] = attitude_after(self._attitude[i], rates[i], 1.0 / CAMERA_RATE_HZ)
+            if valid_ever[i]:
+                actions.append(self._act(rel[i], self._feedforward(vel[i], i), self._hold_height_m[i]))
+            else:
+                actions.append(self._servo_image(bbox[i], self._attitude[i], self._servo_state[i]))
+        action = np.stack(actions).astype(np.float32)
         return (action if batched else action[0]), state
 
-    def _servo_image(self, bbox_norm: np.ndarray, state: np.ndarray) -> np.ndarray:
-        """No 3D estimate yet (e.g. before the ROI depths converge): centre the box in the image with the PI law of
-        `ScriptedFollowerConfig`; `state` (the integral and last setpoint [m/s], forward and left) is updated in
-        place. Image right is the drone's right, image up its forward direction; this motion also gives the feature
-        triangulation its baseline. Without a box the setpoint decays towards hover at the acceleration limit."""
+    def _start_episodes(self, n: int, episode_start: np.ndarray | None) -> None:
+        """Fresh per-env state for a new batch size, and for the envs `episode_start` marks."""
+        if self._hold_height_m is None or len(self._hold_height_m) != n:
+            starts = np.ones(n, bool)
+            self._hold_height_m, self._servo_state = np.full(n, np.nan), np.zeros((n, 4))
+            self._attitude, self._fixed_frames = np.tile(np.eye(3), (n, 1, 1)), np.full(n, -1)
+        elif episode_start is None:
+            return
+        else:
+            starts = np.asarray(episode_start, bool).reshape(-1)
+        assert self._hold_height_m is not None and self._servo_state is not None
+        assert self._attitude is not None and self._fixed_frames is not None
+        self._hold_height_m[starts] = np.nan
+        self._servo_state[starts] = 0.0
+        self._attitude[starts] = np.eye(3)
+        self._fixed_frames[starts] = -1
+
+    def _feedforward(self, vel: np.ndarray, i: int) -> np.ndarray:
+        """The target velocity the 3D law feeds forward for env `i`: the estimate's `vel`, blended from the servo's
+        integral over `ScriptedFollowerConfig.handover_s` after the episode's first 3D estimate."""
+        assert self._fixed_frames is not None and self._servo_state is not None
+        cfg = self.config
+        frames = int(self._fixed_frames[i])
+        weight = 1.0 if cfg.handover_s == 0.0 else min(1.0, frames / (cfg.handover_s * CAMERA_RATE_HZ))
+        if weight >= 1.0:
+            return vel
+        blended = vel.copy()
+        blended[:2] = weight * vel[:2] + (1.0 - weight) * self._servo_state[i, :2]
+        return blended
+
+    def _servo_image(self, bbox_norm: np.ndarray, R_heading_body: np.ndarray, state: np.ndarray) -> np.ndarray:
+        """No 3D estimate yet (e.g. before the ROI depths converge): fly towards where the box's ray meets level
+        ground, with the PI law of `ScriptedFollowerConfig`; `state` (the integral and last setpoint [m/s], forward
+        and left) is updated in place. This motion also gives the feature triangulation its baseline. Without a box
+        the setpoint decays towards hover at the acceleration limit."""
         cfg = self.config
         dt = 1.0 / CAMERA_RATE_HZ
         integral, last = state[:2], state[2:]
         if np.any(bbox_norm):
-            offset = 2.0 * (bbox_norm[:2] - 0.5)  # (right, down) in half-image units
-            error = -np.array([offset[1], offset[0]])  # (forward, left) towards the box
-            integral += cfg.image_integral_gain_mps_per_s * error * dt
+            error = box_ground_offset(bbox_norm, R_heading_body, cfg.camera_pitch_deg, cfg.camera_fov_deg)
+            integral += cfg.servo_integral_gain_mps_per_s * error * dt
             np.clip(integral, -cfg.max_speed_horizontal_mps, cfg.max_speed_horizontal_mps, out=integral)  # anti-windup
-            wanted = cfg.image_gain_mps * error + integral
+            wanted = cfg.servo_gain_mps * error + integral
         else:
             wanted = np.zeros(2)
         step = wanted - last
-        max_step = cfg.image_max_accel_mps2 * dt
+        max_step = cfg.servo_max_accel_mps2 * dt
         norm = float(np.linalg.norm(step))
         if norm > max_step:
             step *= max_step / norm

@@ -1,4 +1,5 @@
-"""Settings of the stack that follow from the camera's mount pitch, each by a written geometric rule.
+"""The camera's mount pitch: the mount's rotation, and the settings of the stack that follow from the pitch, each by
+a written geometric rule.
 
 The paper's offline settings are a nadir camera's (pitch 90 deg); its real flight pitched the camera 45 deg. A
 nadir camera keeps every setting exactly as configured (sin 90 deg = 1 in floating point too).
@@ -9,9 +10,22 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import numpy as np
+import numpy.typing as npt
+
 from trade.roi_features import RoiConfig
 
 NADIR_PITCH_DEG = 90.0  # optical axis straight down (the paper's offline setting)
+
+
+def mount_rotation(pitch_deg: float) -> npt.NDArray[np.float64]:
+    """R_body_cam (3, 3): optical axis pitched `pitch_deg` below body x, x_cam = -y_body, image top forward.
+
+    z_cam = cos(th) x_b - sin(th) z_b; x_cam = -y_b; y_cam = z_cam x x_cam = -sin(th) x_b - cos(th) z_b.
+    """
+    th = math.radians(pitch_deg)
+    s, c = math.sin(th), math.cos(th)
+    return np.array([[0.0, -s, c], [-1.0, 0.0, 0.0], [0.0, -c, -s]])
 
 
 def check_pitch(name: str, pitch_deg: float) -> None:

@@ -30,6 +30,7 @@ OBSERVATION_SIZES = (("target_pos_rel_m", 3), ("target_vel_mps", 3), ("drone_vel
 _ends = np.cumsum([n for _, n in OBSERVATION_SIZES]).tolist()
 _LAYOUT = tuple((key, end - n, end) for (key, n), end in zip(OBSERVATION_SIZES, _ends))
 _IMU_ENTRIES = dict(OBSERVATION_SIZES)["imu"]  # specific force (3) then rate (3)
+IMU_GYRO_COLUMNS = slice(3, 6)  # the rate's entries in "imu" [rad/s], body x forward, y left, z up
 
 
 def observation_space() -> spaces.Dict:

@@ -78,9 +78,7 @@ def make_policy(name: str, seed: int, camera_pitch_deg: float, action_scale: Act
     if name == "waypoint":
         return WaypointFollower(WaypointFollowerConfig.of(config))
     if name == "scripted":
-        return ScriptedFollower(ScriptedFollowerConfig(camera_pitch_deg=camera_pitch_deg,
-                                                       max_speed_horizontal_mps=action_scale.horizontal_mps,
-                                                       max_speed_vertical_mps=action_scale.vertical_mps))
+        return ScriptedFollower(ScriptedFollowerConfig.of(config, action_scale))
     if name == "hover":
         return HoverPolicy()
     if name == "random":

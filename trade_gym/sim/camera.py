@@ -13,7 +13,7 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
-from trade.camera_pitch import NADIR_PITCH_DEG  # a camera looking straight down (`CameraConfig.pitch_deg`)
+from trade.camera_pitch import NADIR_PITCH_DEG, mount_rotation  # NADIR: a camera looking straight down
 from trade.geometry import CameraIntrinsics, Pose
 from trade_gym.sim.mesh_files import draw_meshes_from_files
 
@@ -107,16 +107,6 @@ def standoff_m(height_m: float, pitch_deg: float) -> float:
     band (`trade_gym.scoring.FollowBand`) is centred there, and a pitched camera's drone starts there
     (`trade_gym.sim.world.World.drone_start`)."""
     return height_m / math.tan(math.radians(pitch_deg)) if pitch_deg < NADIR_PITCH_DEG else 0.0
-
-
-def mount_rotation(pitch_deg: float) -> FloatArray:
-    """R_body_cam (3, 3): optical axis pitched `pitch_deg` below body x, x_cam = -y_body, image top forward.
-
-    z_cam = cos(th) x_b - sin(th) z_b; x_cam = -y_b; y_cam = z_cam x x_cam = -sin(th) x_b - cos(th) z_b.
-    """
-    th = math.radians(pitch_deg)
-    s, c = math.sin(th), math.cos(th)
-    return np.array([[0.0, -s, c], [-1.0, 0.0, 0.0], [0.0, -c, -s]])
 
 
 def projection_matrix(K: CameraIntrinsics, near_m: float, far_m: float, renderer: str) -> list[float]:
