@@ -16,12 +16,13 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from trade.camera_pitch import NADIR_PITCH_DEG, mount_rotation
+from trade.camera_pitch import mount_rotation, standoff_m
 
 FloatArray = npt.NDArray[np.float64]
 
-# The least downward component of a unit box ray the servo divides by: a ray at or above the horizon meets the ground
-# beyond any offset the action can ask for (1e-3 is 1000 heights away).
+# The least downward component of a box ray an image servo divides by, per unit of the ray's length (here; the
+# `WaypointFollower`'s rays are at least 1 long): a ray at or above the horizon meets the ground beyond any offset the
+# action can ask for (1e-3 is 1000 heights away).
 MIN_RAY_DESCENT = 1e-3
 
 
@@ -46,5 +47,4 @@ def box_ground_offset(bbox_norm: FloatArray, R_heading_body: FloatArray, camera_
     c, s = math.cos(yaw), math.sin(yaw)
     forward, left = c * ray[0] + s * ray[1], -s * ray[0] + c * ray[1]
     descent = max(-ray[2], MIN_RAY_DESCENT * float(np.linalg.norm(ray)))
-    axis_ahead = 0.0 if camera_pitch_deg >= NADIR_PITCH_DEG else 1.0 / math.tan(math.radians(camera_pitch_deg))
-    return np.array([forward / descent - axis_ahead, left / descent])
+    return np.array([forward / descent - standoff_m(1.0, camera_pitch_deg), left / descent])

@@ -18,8 +18,6 @@ from trade_gym.agents.image_servo import attitude_after, box_ground_offset
 from trade_gym.config import CAMERA_FOV_RANGE_DEG, CAMERA_PITCH_RANGE_DEG, CAMERA_RATE_HZ, EnvConfig
 from trade_gym.observation import IMU_GYRO_COLUMNS
 
-HANDED_OVER_FRAMES = 2 ** 62  # `ScriptedFollower._fixed_frames` of an episode with no servo to hand over from
-
 
 @dataclass(frozen=True)
 class ScriptedFollowerConfig:
@@ -94,6 +92,31 @@ def body_rates(observation: dict[str, np.ndarray], n: int) -> np.ndarray:
     return np.asarray(observation["imu"], dtype=np.float64).reshape(n, -1)[:, IMU_GYRO_COLUMNS]
 
 
+HANDED_OVER_FRAMES = 2 ** 62  # `_Episodes.fixed_frames` of an episode with no servo to hand over from
+
+
+@dataclass
+class _Episodes:
+    """The per-env state of a batch's episodes (n envs), updated in place."""
+
+    hold_height_m: np.ndarray  # (n,): the height above the target to hold [m]; NaN before the first 3D estimate
+    servo: np.ndarray  # (n, 4): the image servo's integral (2) and last setpoint (2) [m/s], forward and left
+    attitude: np.ndarray  # (n, 3, 3): R_heading_body from the gyro since the episode start
+    # (n,): frames since the episode's first 3D estimate; -1 before it; HANDED_OVER_FRAMES when no servo ran before it
+    fixed_frames: np.ndarray
+
+    @classmethod
+    def fresh(cls, n: int) -> _Episodes:
+        return cls(np.full(n, np.nan), np.zeros((n, 4)), np.tile(np.eye(3), (n, 1, 1)), np.full(n, -1))
+
+    def restart(self, starts: np.ndarray) -> None:
+        """Start new episodes for the envs `starts` (n,) marks: level, without a height, a servo state or an estimate."""
+        self.hold_height_m[starts] = np.nan
+        self.servo[starts] = 0.0
+        self.attitude[starts] = np.eye(3)
+        self.fixed_frames[starts] = -1
+
+
 class ScriptedFollower:
     """`predict(obs) -> (action, state)`; works on one observation or a batch (leading axis). Per env of a batch,
     `episode_start` True (and every env on the first call, after `reset()` or when the batch size changes) starts an
@@ -101,14 +124,10 @@ class ScriptedFollower:
 
     def __init__(self, config: ScriptedFollowerConfig | None = None) -> None:
         self.config = config or ScriptedFollowerConfig()
-        self._hold_height_m: np.ndarray | None = None
-        self._servo_state: np.ndarray | None = None  # (n, 4): the image servo's integral (2) and last setpoint (2)
-        self._attitude: np.ndarray | None = None  # (n, 3, 3): R_heading_body from the gyro since the episode start
-        # (n,): frames since the episode's first 3D estimate; -1 before it; HANDED_OVER_FRAMES without a servo before
-        self._fixed_frames: np.ndarray | None = None
+        self._episodes: _Episodes | None = None
 
     def reset(self) -> None:
-        self._hold_height_m = self._servo_state = self._attitude = self._fixed_frames = None
+        self._episodes = None
 
     def predict(
         self,
@@ -118,55 +137,41 @@ class ScriptedFollower:
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
         rel, vel, bbox, batched = target_inputs(observation)
-        valid_ever = np.any(rel != 0.0, axis=1)
-        self._start_episodes(len(rel), episode_start)
-        assert self._hold_height_m is not None and self._servo_state is not None  # set by _start_episodes
-        assert self._attitude is not None and self._fixed_frames is not None
-        rates = body_rates(observation, len(rel))
-        # The first valid estimate of an episode fixes the height to hold.
-        self._hold_height_m = np.where(np.isnan(self._hold_height_m) & valid_ever, -rel[:, 2], self._hold_height_m)
-        # an episode whose first frame has a 3D estimate has no servo to hand over from (e.g. oracle perception)
-        first = valid_ever & (self._fixed_frames < 0)
-        unservoed = first & ~np.any(self._servo_state, axis=1)
-        self._fixed_frames = np.where(unservoed, HANDED_OVER_FRAMES, self._fixed_frames + valid_ever)
+        n = len(rel)
+        if self._episodes is None or len(self._episodes.hold_height_m) != n:
+            self._episodes = _Episodes.fresh(n)
+        elif episode_start is not None:
+            self._episodes.restart(np.asarray(episode_start, bool).reshape(-1))
+        ep = self._episodes
+        estimated = np.any(rel != 0.0, axis=1)  # a 3D estimate: from the episode's first one on
+        rates = body_rates(observation, n)
         actions = []
-        for i in range(len(rel)):
-            self._attitude[i] = attitude_after(self._attitude[i], rates[i], 1.0 / CAMERA_RATE_HZ)
-            if valid_ever[i]:
-                actions.append(self._act(rel[i], self._feedforward(vel[i], i), self._hold_height_m[i]))
+        for i in range(n):
+            ep.attitude[i] = attitude_after(ep.attitude[i], rates[i], 1.0 / CAMERA_RATE_HZ)
+            if not estimated[i]:
+                actions.append(self._servo_image(bbox[i], ep.attitude[i], ep.servo[i]))
+                continue
+            if ep.fixed_frames[i] < 0:  # the episode's first 3D estimate fixes the height to hold
+                ep.hold_height_m[i] = -rel[i, 2]
+                # an estimate from the first frame on (e.g. oracle perception) has no servo to hand over from
+                ep.fixed_frames[i] = 0 if np.any(ep.servo[i]) else HANDED_OVER_FRAMES
             else:
-                actions.append(self._servo_image(bbox[i], self._attitude[i], self._servo_state[i]))
+                ep.fixed_frames[i] += 1
+            feedforward = self._feedforward(vel[i], ep.servo[i], int(ep.fixed_frames[i]))
+            actions.append(self._act(rel[i], feedforward, ep.hold_height_m[i]))
         action = np.stack(actions).astype(np.float32)
         return (action if batched else action[0]), state
 
-    def _start_episodes(self, n: int, episode_start: np.ndarray | None) -> None:
-        """Fresh per-env state for a new batch size, and for the envs `episode_start` marks."""
-        if self._hold_height_m is None or len(self._hold_height_m) != n:
-            starts = np.ones(n, bool)
-            self._hold_height_m, self._servo_state = np.full(n, np.nan), np.zeros((n, 4))
-            self._attitude, self._fixed_frames = np.tile(np.eye(3), (n, 1, 1)), np.full(n, -1)
-        elif episode_start is None:
-            return
-        else:
-            starts = np.asarray(episode_start, bool).reshape(-1)
-        assert self._hold_height_m is not None and self._servo_state is not None
-        assert self._attitude is not None and self._fixed_frames is not None
-        self._hold_height_m[starts] = np.nan
-        self._servo_state[starts] = 0.0
-        self._attitude[starts] = np.eye(3)
-        self._fixed_frames[starts] = -1
-
-    def _feedforward(self, vel: np.ndarray, i: int) -> np.ndarray:
-        """The target velocity the 3D law feeds forward for env `i`: the estimate's `vel`, blended from the servo's
-        integral over `ScriptedFollowerConfig.handover_s` after the episode's first 3D estimate."""
-        assert self._fixed_frames is not None and self._servo_state is not None
+    def _feedforward(self, vel: np.ndarray, servo: np.ndarray, fixed_frames: int) -> np.ndarray:
+        """The target velocity the 3D law feeds forward `fixed_frames` after the episode's first 3D estimate: the
+        estimate's `vel`, blended from the servo's integral (`servo`'s first two) over
+        `ScriptedFollowerConfig.handover_s`."""
         cfg = self.config
-        frames = int(self._fixed_frames[i])
-        weight = 1.0 if cfg.handover_s == 0.0 else min(1.0, frames / (cfg.handover_s * CAMERA_RATE_HZ))
+        weight = 1.0 if cfg.handover_s == 0.0 else min(1.0, fixed_frames / (cfg.handover_s * CAMERA_RATE_HZ))
         if weight >= 1.0:
             return vel
         blended = vel.copy()
-        blended[:2] = weight * vel[:2] + (1.0 - weight) * self._servo_state[i, :2]
+        blended[:2] = weight * vel[:2] + (1.0 - weight) * servo[:2]
         return blended
 
     def _servo_image(self, bbox_norm: np.ndarray, R_heading_body: np.ndarray, state: np.ndarray) -> np.ndarray:

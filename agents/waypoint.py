@@ -16,14 +16,12 @@ import numpy as np
 from trade.camera_pitch import NADIR_PITCH_DEG
 from trade.validation import is_finite_number, is_positive_number, require
 from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, DEFAULT_WAYPOINT_SCALE
+from trade_gym.agents.image_servo import MIN_RAY_DESCENT
 from trade_gym.agents.scripted import target_inputs
 from trade_gym.config import CAMERA_FOV_RANGE_DEG, CAMERA_PITCH_RANGE_DEG, CAMERA_RATE_HZ, EnvConfig
 from trade_gym.sim.quadrotor import QuadrotorConfig
 
 WAYPOINT_MODE = "waypoint"  # the env's action_mode this follower flies
-# The least downward component of a box ray the pitched image servo divides by: a ray at or above the horizon meets
-# the ground beyond any offset the action can ask for (per unit ray: 1e-3 is 1000 servo heights away).
-MIN_RAY_DESCENT = 1e-3
 
 
 @dataclass(frozen=True)

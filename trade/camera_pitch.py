@@ -28,6 +28,14 @@ def mount_rotation(pitch_deg: float) -> npt.NDArray[np.float64]:
     return np.array([[0.0, -s, c], [-1.0, 0.0, 0.0], [0.0, -c, -s]])
 
 
+def standoff_m(height_m: float, pitch_deg: float) -> float:
+    """The horizontal distance [m] at which a camera `height_m` above flat ground, pitched `pitch_deg` below the
+    horizon, has the ground on its optical axis: height / tan(pitch); exactly 0 for a downward camera. The following
+    band (`trade_gym.scoring.FollowBand`) is centred there, and a pitched camera's drone starts there
+    (`trade_gym.sim.world.World.drone_start`)."""
+    return height_m / math.tan(math.radians(pitch_deg)) if pitch_deg < NADIR_PITCH_DEG else 0.0
+
+
 def check_pitch(name: str, pitch_deg: float) -> None:
     """ValueError naming `name` unless 0 < pitch_deg <= 90 [deg] (90: nadir; 0 would look at the horizon)."""
     if not (math.isfinite(pitch_deg) and 0.0 < pitch_deg <= NADIR_PITCH_DEG):

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from trade.camera_pitch import NADIR_PITCH_DEG
+from trade.camera_pitch import NADIR_PITCH_DEG, standoff_m
 from trade.depth_alignment import sample_map
 from trade.geometry import CameraIntrinsics, Pose
 from trade.raycast import raycast_plane
@@ -25,7 +25,6 @@ from trade_gym.ground_truth import GroundTruth
 from trade_gym.metrics import depth_or_none, on_decoy
 from trade_gym.perception.base import FloatArray, GroundEstimate, PerceptionOutput
 from trade_gym.reward import RewardInputs
-from trade_gym.sim.camera import standoff_m
 
 if TYPE_CHECKING:
     from trade_gym.sim.world import World

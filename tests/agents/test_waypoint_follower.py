@@ -11,7 +11,7 @@ from trade_gym.agents import WaypointFollower, WaypointFollowerConfig
 from trade_gym.config import EnvConfig
 from trade_gym.env import TradeFollowEnv
 from trade_gym.rollout import fly_episode
-from trade_gym.sim.camera import mount_rotation
+from trade.camera_pitch import mount_rotation
 
 MIN_VISIBLE_FRACTION = 0.95
 EPISODE_STEPS = 900  # the full 30 s

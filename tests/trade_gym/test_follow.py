@@ -115,7 +115,7 @@ def test_first_3d_estimate_feeds_forward_the_servos_integral_then_hands_over():
     policy = ScriptedFollower(config)
     for k in range(20):
         policy.predict(_unfixed((0.5, 0.3)), episode_start=np.array([k == 0]))  # box ahead
-    integral_mps = policy._servo_state[0, 0]
+    integral_mps = policy._episodes.servo[0, 0]
     assert integral_mps > 0.5
     frames = int(config.handover_s * CAMERA_RATE_HZ)
     handed = [policy.predict(_fixed((0.0, 0.0)))[0] for _ in range(frames + 1)]

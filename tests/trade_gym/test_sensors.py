@@ -9,7 +9,8 @@ import pybullet as p
 import pytest
 
 from trade.geometry import CameraIntrinsics, Pose, matrix_to_quat_xyzw, project_world, rotation_z
-from trade_gym.sim.camera import Camera, CameraConfig, mount_rotation
+from trade.camera_pitch import mount_rotation
+from trade_gym.sim.camera import Camera, CameraConfig
 from trade_gym.sim.imu import Imu, ImuConfig
 from trade_gym.sim.pose_source import VioConfig, VioPoseSource, make_pose_source
 

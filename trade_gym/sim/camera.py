@@ -13,7 +13,7 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
-from trade.camera_pitch import NADIR_PITCH_DEG, mount_rotation  # NADIR: a camera looking straight down
+from trade.camera_pitch import mount_rotation
 from trade.geometry import CameraIntrinsics, Pose
 from trade_gym.sim.mesh_files import draw_meshes_from_files
 
@@ -99,14 +99,6 @@ class CameraFrame:
     seg: npt.NDArray[np.int32]
     T_world_cam: Pose
     intrinsics: CameraIntrinsics
-
-
-def standoff_m(height_m: float, pitch_deg: float) -> float:
-    """The horizontal distance [m] at which a camera `height_m` above flat ground, pitched `pitch_deg` below the
-    horizon, has the ground on its optical axis: height / tan(pitch); exactly 0 for a downward camera. The following
-    band (`trade_gym.scoring.FollowBand`) is centred there, and a pitched camera's drone starts there
-    (`trade_gym.sim.world.World.drone_start`)."""
-    return height_m / math.tan(math.radians(pitch_deg)) if pitch_deg < NADIR_PITCH_DEG else 0.0
 
 
 def projection_matrix(K: CameraIntrinsics, near_m: float, far_m: float, renderer: str) -> list[float]:

@@ -16,11 +16,10 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
-from trade.camera_pitch import NADIR_PITCH_DEG
+from trade.camera_pitch import NADIR_PITCH_DEG, standoff_m
 from trade.geometry import CameraIntrinsics, Pose
 from trade_gym.sim import city, desert, mountain
 from trade_gym.sim.bullet_lists import bullet_list
-from trade_gym.sim.camera import standoff_m
 from trade_gym.sim.culling import ViewCuller
 from trade_gym.sim.evasive import EvasiveMotion
 from trade_gym.sim.layout import Lake, Road, SceneLayout, direction, parked
