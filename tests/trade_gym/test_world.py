@@ -395,3 +395,34 @@ def test_a_pitched_camera_starts_its_standoff_behind_at_the_same_height(client, 
     assert pitched_yaw == yaw and back_m == pytest.approx(height_m) and np.linalg.norm(nadir[:2] - pitched[:2]) == \
         pytest.approx(height_m)
     assert pitched[2] - world.ground_height_m(float(pitched[0]), float(pitched[1])) == pytest.approx(height_m)
+
+
+def _collider_ids(world: World) -> list[int]:
+    """The world's bodies with a collision shape: the terrain's first tile, the boulders, the buildings' walls."""
+    roles = world.body_ids_by_role
+    return [roles["terrain"][0], *roles["boulders"], *roles["buildings"][:1]]
+
+
+@pytest.mark.parametrize("scene", ["desert", "city", "mountain"])
+def test_an_undrawn_world_has_no_visual_shapes_and_the_same_colliders_and_rays(client, scene):
+    """A world never rendered (oracle perception) is built without visual shapes; its physics must not notice."""
+    def built(rendered: bool):
+        world = _build(client, scene, seed=3, rendered=rendered)
+        n_bodies = p.getNumBodies(physicsClientId=client)
+        # pybullet reports a body without a visual shape as drawn by its collision shape, if it has one
+        drawn_ids = {i for i in range(n_bodies) if p.getVisualShapeData(i, physicsClientId=client)}
+        boxes = [p.getAABB(b, physicsClientId=client) for b in _collider_ids(world)]
+        role = {b: name for name, ids in world.body_ids_by_role.items() for b in ids}
+        (x0, x1), (y0, y1) = world.terrain.x_m[[0, -1]], world.terrain.y_m[[0, -1]]
+        gx, gy = np.meshgrid(np.linspace(x0, x1, 40), np.linspace(y0, y1, 40))
+        starts = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, 200.0)])
+        hits = p.rayTestBatch(starts.tolist(), (starts - [0.0, 0.0, 400.0]).tolist(), physicsClientId=client)
+        return world, n_bodies, drawn_ids, boxes, [(role.get(h[0]), h[3]) for h in hits]
+
+    drawn, n_bodies, drawn_ids, boxes, rays = built(True)
+    undrawn, n_bodies_u, drawn_ids_u, boxes_u, rays_u = built(False)
+    assert drawn.drawn and not undrawn.drawn
+    assert drawn.target.body_id in drawn_ids and drawn_ids_u == set(_collider_ids(undrawn))
+    assert n_bodies_u == n_bodies - len(drawn.body_ids_by_role["terrain"]) + 1  # the terrain as one body
+    assert boxes_u == boxes
+    assert {r for r, _ in rays} >= {"terrain"} and rays_u == rays

@@ -142,7 +142,10 @@ def _float3(values: np.ndarray) -> tuple[float, float, float]:
 
 
 def apply_to_world(world: World, appearance: Appearance) -> None:
-    """Give the world's terrain its ground variant and tint and every vehicle (target and decoys alike) the paint."""
+    """Give the world's terrain its ground variant and tint and every vehicle (target and decoys alike) the paint
+    (nothing to paint in a world built undrawn)."""
+    if not world.drawn:
+        return
     cid, a = world.client_id, appearance
     ground = world.spec.ground_texture
     key = f"c{a.ground_contrast:g}-d{a.ground_detail}-r{a.ground_quarter_turns}"

@@ -215,15 +215,12 @@ def terrain_pose(
     return np.column_stack([xy, z[:, 4]]) + half[:, 2:3] * n, R
 
 
-def create_vehicle_shape(client_id: int, kind: str) -> int:
-    """Visual shape id for `kind` (create once per reset, share between identical vehicles)."""
-    return vehicle_model(kind).mesh.create_visual_shape(client_id)
-
-
 def create_vehicle_body(client_id: int, visual_shape_id: int, texture_id: int) -> int:
-    """Mass-0 body with a visual shape and no collision shape; a maximal-coordinates (btRigidBody) body,
-    which stepSimulation skips at a fraction of a fixed-base multibody's cost."""
+    """Mass-0 body with a visual shape (none: -1, for a world never rendered) and no collision shape; a
+    maximal-coordinates (btRigidBody) body, which stepSimulation skips at a fraction of a fixed-base multibody's
+    cost."""
     body = p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=visual_shape_id,
                              useMaximalCoordinates=True, physicsClientId=client_id)
-    p.changeVisualShape(body, -1, textureUniqueId=texture_id, rgbaColor=[1, 1, 1, 1], physicsClientId=client_id)
+    if visual_shape_id >= 0:
+        p.changeVisualShape(body, -1, textureUniqueId=texture_id, rgbaColor=[1, 1, 1, 1], physicsClientId=client_id)
     return body

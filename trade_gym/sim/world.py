@@ -10,6 +10,7 @@ import itertools
 import math
 from dataclasses import dataclass
 from types import MappingProxyType
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -34,7 +35,7 @@ from trade_gym.sim.target_motion import TargetMotion, motion_summary
 from trade_gym.sim.terrain import Heightfield
 from trade_gym.sim.vehicle_poses import VehiclePoses
 from trade_gym.sim.vehicles import (
-    Motion, Vehicle, VehicleMotion, create_vehicle_body, create_vehicle_shape, vehicle_model,
+    Motion, Vehicle, VehicleMotion, create_vehicle_body, vehicle_model,
 )
 
 FloatArray = npt.NDArray[np.float64]
@@ -60,6 +61,30 @@ def make_layout(spec: SceneSpec, rng: np.random.Generator, target_speed_mps: flo
     return LAYOUT_BUILDERS[spec.name](spec, rng, target_speed_mps)
 
 
+@dataclass(frozen=True)
+class BodyLooks:
+    """How a world's bodies are drawn: its textures by name (`texture`) and visual shapes (`visual`). A world that is
+    never rendered is built without any (`drawn` False: every id is -1, no texture is loaded). Its bodies, their order
+    and their collision shapes are the same, so are the physics and every ray test. The terrain's visual mesh is most
+    of a drawn world's build time."""
+
+    client_id: int
+    drawn: bool
+    textures: MappingProxyType[str, int]
+
+    @classmethod
+    def load(cls, client_id: int, drawn: bool, names: set[str]) -> BodyLooks:
+        """Load the textures `names` (none unless `drawn`)."""
+        tex = {n: p.loadTexture(str(texture_path(n)), physicsClientId=client_id) for n in sorted(names)} if drawn else {}
+        return cls(client_id, drawn, MappingProxyType(tex))
+
+    def texture(self, name: str) -> int:
+        return self.textures[name] if self.drawn else -1
+
+    def visual(self, mesh: Mesh, rgba: tuple[float, float, float, float] | None = None) -> int:
+        return mesh.create_visual_shape(self.client_id, rgba) if self.drawn else -1
+
+
 def _static_body(cid: int, collision: int, visual: int, position_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
                  texture_id: int = -1) -> int:
     """Mass-0 body in maximal coordinates (a static btRigidBody: stepSimulation skips it at a fraction of a
@@ -71,9 +96,10 @@ def _static_body(cid: int, collision: int, visual: int, position_m: tuple[float,
     return body
 
 
-def _textured_body(cid: int, mesh: Mesh, texture_id: int, collision: int = -1) -> int:
-    """Static body at the world origin: `mesh` in world coordinates, optional collision shape."""
-    return _static_body(cid, collision, mesh.create_visual_shape(cid), texture_id=texture_id)
+def _textured_body(looks: BodyLooks, mesh: Mesh, texture: str, collision: int = -1) -> int:
+    """Static body at the world origin: `mesh` in world coordinates with the texture named `texture`, optional
+    collision shape."""
+    return _static_body(looks.client_id, collision, looks.visual(mesh), texture_id=looks.texture(texture))
 
 
 def _tile_edges(cells: int, tiles: int) -> npt.NDArray[np.int64]:
@@ -81,72 +107,83 @@ def _tile_edges(cells: int, tiles: int) -> npt.NDArray[np.int64]:
     return np.round(np.linspace(0, cells, min(tiles, cells) + 1)).astype(np.int64)
 
 
-def _terrain_tiles(cid: int, layout: SceneLayout, texture_id: int,
-                   tiles_per_side: int) -> tuple[tuple[int, ...], ViewCuller]:
+def _terrain_tiles(looks: BodyLooks, layout: SceneLayout, tiles_per_side: int) -> tuple[tuple[int, ...], ViewCuller]:
     """The heightfield's textured grid mesh (triangulated like the collision surface) as tiles_per_side^2
     tiles, each a body at the heightfield's origin; the first also carries the GEOM_HEIGHTFIELD collision.
     Returns the tile bodies and the culler that owns their colour."""
-    hf = layout.terrain
+    cid, hf = looks.client_id, layout.terrain
     ny, nx = hf.shape
     collision = p.createCollisionShape(p.GEOM_HEIGHTFIELD, meshScale=[hf.spacing_m, hf.spacing_m, 1.0],
                                        heightfieldData=bullet_list("heightfield", hf.heights_m.ravel()),
                                        numHeightfieldRows=nx, numHeightfieldColumns=ny, physicsClientId=cid)
     origin = np.array([*hf.centre_m, hf.bullet_base_z_m])
-    gx, gy = np.meshgrid(hf.x_m, hf.y_m)
-    vertices = np.stack([gx - origin[0], gy - origin[1], hf.heights_m.astype(np.float64) - origin[2]], axis=-1)
-    uvs = grid_uvs(ny, nx, float(hf.x_m[0]), float(hf.y_m[0]), float(hf.x_m[1] - hf.x_m[0]),
-                   float(TEXTURE_PERIOD_M[layout.spec.ground_texture]))
-    normals = hf.vertex_normals().reshape(ny, nx, 3)
-    drop = layout.lake.normalised_radius(gx, gy) <= 1.0 if layout.lake is not None else None
+    tile_visual = _terrain_tile_visuals(looks, layout, origin) if looks.drawn else lambda rows, cols: -1
     base_position = tuple(origin.tolist())
     bodies: list[int] = []
     lo, hi = [], []
     for r0, r1 in itertools.pairwise(_tile_edges(ny - 1, tiles_per_side)):
         for c0, c1 in itertools.pairwise(_tile_edges(nx - 1, tiles_per_side)):
             rows, cols = slice(r0, r1 + 1), slice(c0, c1 + 1)
-            visual = create_terrain_visual(cid, vertices[rows, cols], uvs[rows, cols], normals[rows, cols],
-                                           None if drop is None else drop[rows, cols])
-            bodies.append(_static_body(cid, collision if not bodies else -1, visual, base_position, texture_id))
+            bodies.append(_static_body(cid, collision if not bodies else -1, tile_visual(rows, cols), base_position,
+                                       looks.texture(layout.spec.ground_texture)))
             heights = hf.heights_m[rows, cols]
             lo.append((hf.x_m[c0], hf.y_m[r0], float(heights.min())))
             hi.append((hf.x_m[c1], hf.y_m[r1], float(heights.max())))
     return tuple(bodies), ViewCuller(cid, bodies, lo, hi, [WHITE_RGBA] * len(bodies))
 
 
-def _boulder_body(cid: int, layout: SceneLayout, texture_id: int) -> int:
+def _terrain_tile_visuals(looks: BodyLooks, layout: SceneLayout, origin: FloatArray) -> Callable[[slice, slice], int]:
+    """Maker of the visual shape of the terrain grid's tile (rows, cols), in the frame of a body at `origin`."""
+    hf = layout.terrain
+    ny, nx = hf.shape
+    gx, gy = np.meshgrid(hf.x_m, hf.y_m)
+    vertices = np.stack([gx - origin[0], gy - origin[1], hf.heights_m.astype(np.float64) - origin[2]], axis=-1)
+    uvs = grid_uvs(ny, nx, float(hf.x_m[0]), float(hf.y_m[0]), float(hf.x_m[1] - hf.x_m[0]),
+                   float(TEXTURE_PERIOD_M[layout.spec.ground_texture]))
+    normals = hf.vertex_normals().reshape(ny, nx, 3)
+    drop = layout.lake.normalised_radius(gx, gy) <= 1.0 if layout.lake is not None else None
+
+    def tile_visual(rows: slice, cols: slice) -> int:
+        return create_terrain_visual(looks.client_id, vertices[rows, cols], uvs[rows, cols], normals[rows, cols],
+                                     None if drop is None else drop[rows, cols])
+
+    return tile_visual
+
+
+def _boulder_body(looks: BodyLooks, layout: SceneLayout) -> int:
     """All boulders as one body: their meshes merged in world coordinates, drawn as one visual shape and
     collided with as one static BVH triangle mesh (exactly the drawn surface). One body instead of one per
     rock keeps stepSimulation's per-body cost out of the step loop."""
     rocks = layout.boulders
     mesh = placed_meshes([rock_mesh(b.prototype, b.size_class) for b in rocks], [b.yaw_rad for b in rocks],
                          [b.centre_m for b in rocks])
-    return _textured_body(cid, mesh, texture_id, collision=mesh.create_collision_shape(cid))
+    return _textured_body(looks, mesh, "rock", collision=mesh.create_collision_shape(looks.client_id))
 
 
-def _building_bodies(cid: int, layout: SceneLayout, textures: dict[str, int]) -> list[int]:
+def _building_bodies(looks: BodyLooks, layout: SceneLayout) -> list[int]:
     lo, hi = layout.buildings_lo_m, layout.buildings_hi_m
     if len(lo) == 0:
         return []
     walls, roofs = building_meshes(lo, hi, TEXTURE_PERIOD_M["facade"], TEXTURE_PERIOD_M["roof"])
     n = len(lo)
     collision = p.createCollisionShapeArray(shapeTypes=[p.GEOM_BOX] * n, halfExtents=((hi - lo) / 2.0).tolist(),
-                                            collisionFramePositions=((hi + lo) / 2.0).tolist(), physicsClientId=cid)
-    return [_textured_body(cid, walls, textures["facade"], collision=collision),
-            _textured_body(cid, roofs, textures["roof"])]
+                                            collisionFramePositions=((hi + lo) / 2.0).tolist(),
+                                            physicsClientId=looks.client_id)
+    return [_textured_body(looks, walls, "facade", collision=collision), _textured_body(looks, roofs, "roof")]
 
 
-def _road_body(cid: int, road: Road, hf: Heightfield, texture_id: int) -> int:
+def _road_body(looks: BodyLooks, road: Road, hf: Heightfield) -> int:
     s, xy = road.path.sample(ROAD_SAMPLE_M)
     normal = road.path.tangent(s) @ np.array([[0.0, 1.0], [-1.0, 0.0]])  # rotate +90 deg: left normal
     sides = np.stack([xy + road.half_width_m * normal, xy - road.half_width_m * normal], 1)  # (K, 2 left/right, 2)
     z = hf.height_m(sides[..., 0], sides[..., 1]) + ROAD_LIFT_M
-    return _textured_body(cid, strip_mesh(xy, normal, s, road.half_width_m, z, TEXTURE_PERIOD_M["dirt_road"]),
-                          texture_id)
+    return _textured_body(looks, strip_mesh(xy, normal, s, road.half_width_m, z, TEXTURE_PERIOD_M["dirt_road"]),
+                          "dirt_road")
 
 
-def _lake_body(cid: int, lake: Lake) -> int:
+def _lake_body(looks: BodyLooks, lake: Lake) -> int:
     mesh = polygon_mesh(lake.outline_m(), lake.level_m + LAKE_LIFT_M)
-    return _static_body(cid, -1, mesh.create_visual_shape(cid, rgba=LAKE_RGBA))
+    return _static_body(looks.client_id, -1, looks.visual(mesh, rgba=LAKE_RGBA))
 
 
 class World:
@@ -156,13 +193,15 @@ class World:
     Attributes: `spec`, `layout` (everything generated), `terrain` (Heightfield), `target` and `decoys`
     (Vehicle), `body_ids_by_role` (terrain (its tiles), boulders (all rocks in one body), buildings, road, lake),
     `static_body_ids` (a frozenset of all of those; road and lake have no collision shape, the terrain's first tile
-    carries a GEOM_HEIGHTFIELD matching `terrain`) and `culler` (`ViewCuller` of the terrain tiles: call
-    `prepare_render` before each render).
+    carries a GEOM_HEIGHTFIELD matching `terrain`), `culler` (`ViewCuller` of the terrain tiles: call
+    `prepare_render` before each render) and `drawn` (False: built without visual shapes or textures, never to be
+    rendered; `BodyLooks`).
     """
 
     def __init__(self, client_id: int, layout: SceneLayout, target: Vehicle, decoys: tuple[Vehicle, ...],
-                 body_ids_by_role: dict[str, tuple[int, ...]], culler: ViewCuller) -> None:
+                 body_ids_by_role: dict[str, tuple[int, ...]], culler: ViewCuller, drawn: bool = True) -> None:
         self.client_id = client_id
+        self.drawn = drawn
         self.layout = layout
         self.spec: SceneSpec = layout.spec
         self.terrain: Heightfield = layout.terrain
@@ -334,8 +373,8 @@ def build_world(client_id: int, scene: str, rng: np.random.Generator, target_spe
                 rendered: bool = True) -> World:
     """Generate and build `scene` in a freshly reset pybullet client (same rng state -> same world); `decoys`
     picks which of the drawn decoys are built, `target_motion` how the target drives (drawn after the decoys).
-    A world that is never `rendered` gets its terrain as one tile (tiles pay only in renders; each costs
-    stepSimulation a static body's update per substep)."""
+    A world that is never `rendered` is built without visual shapes and textures (`BodyLooks`), its terrain as one
+    body (tiles pay only in renders; each costs stepSimulation a static body's update per substep)."""
     spec = get_scene(scene)
     speed = spec.target_speed_mps if target_speed_mps is None else float(target_speed_mps)
     if not np.isfinite(speed) or speed <= 0.0:
@@ -345,25 +384,24 @@ def build_world(client_id: int, scene: str, rng: np.random.Generator, target_spe
     names = {spec.ground_texture, "vehicle_palette"} | ({"rock"} if layout.boulders else set())
     names |= {"facade", "roof"} if len(layout.buildings_lo_m) else set()
     names |= {"dirt_road"} if layout.road is not None else set()
-    tex = {name: p.loadTexture(str(texture_path(name)), physicsClientId=client_id) for name in sorted(names)}
+    looks = BodyLooks.load(client_id, rendered, names)
     tiles_per_side = TERRAIN_TILES_PER_SIDE if rendered else 1
-    terrain_tiles, culler = _terrain_tiles(client_id, layout, tex[spec.ground_texture], tiles_per_side)
+    terrain_tiles, culler = _terrain_tiles(looks, layout, tiles_per_side)
     roles = {
         "terrain": terrain_tiles,
-        "boulders": (_boulder_body(client_id, layout, tex["rock"]),) if layout.boulders else (),
-        "buildings": tuple(_building_bodies(client_id, layout, tex)),
-        "road": (_road_body(client_id, layout.road, layout.terrain, tex["dirt_road"]),) if layout.road is not None
-        else (),
-        "lake": (_lake_body(client_id, layout.lake),) if layout.lake is not None else (),
+        "boulders": (_boulder_body(looks, layout),) if layout.boulders else (),
+        "buildings": tuple(_building_bodies(looks, layout)),
+        "road": (_road_body(looks, layout.road, layout.terrain),) if layout.road is not None else (),
+        "lake": (_lake_body(looks, layout.lake),) if layout.lake is not None else (),
     }
-    shapes = {kind: create_vehicle_shape(client_id, kind) for kind in sorted({spec.target_kind, spec.decoy_kind})}
+    shapes = {kind: looks.visual(vehicle_model(kind).mesh) for kind in sorted({spec.target_kind, spec.decoy_kind})}
 
     def spawn(kind: str, motion: Motion) -> Vehicle:
-        body = create_vehicle_body(client_id, shapes[kind], tex["vehicle_palette"])
+        body = create_vehicle_body(client_id, shapes[kind], looks.texture("vehicle_palette"))
         return Vehicle(kind, body, vehicle_model(kind).half_extents_m, motion)
 
     target_half = vehicle_model(spec.target_kind).half_extents_m
     target = spawn(spec.target_kind, target_motion.build(layout, target_half, rng))
     decoy_vehicles = tuple(spawn(spec.decoy_kind, m) for m in layout.decoys)
     remove_mesh_files(client_id)  # an EGL client's OBJ files, read as the bodies were created
-    return World(client_id, layout, target, decoy_vehicles, roles, culler)
+    return World(client_id, layout, target, decoy_vehicles, roles, culler, drawn=rendered)
