@@ -46,7 +46,8 @@ class TrainConfig:
 
     algo: str = "ppo"
     total_steps: int = 1_200_000
-    n_envs: int = 2  # SubprocVecEnv workers (one per core)
+    n_envs: int = 2  # training envs in total
+    n_workers: int = 2  # processes the envs step in, at most n_envs (`GroupedSubprocVecEnv`; 1: in this process)
     seed: int = 0
     scenes: tuple[str, ...] = SCENE_NAMES
     episode_duration_s: float = 15.0  # shorter than the env's 30 s: more starts (the hard part) per step
@@ -95,8 +96,8 @@ class TrainConfig:
     def __post_init__(self) -> None:
         c = "TrainConfig"
         check_choice(f"{c}.algo", self.algo, ALGOS)
-        for name in ("total_steps", "n_envs", "n_steps_per_env", "batch_size", "n_epochs", "torch_threads",
-                     "sde_sample_freq",
+        for name in ("total_steps", "n_envs", "n_workers", "n_steps_per_env", "batch_size", "n_epochs",
+                     "torch_threads", "sde_sample_freq",
                      "sac_buffer_size", "sac_learning_starts", "sac_gradient_steps"):
             value = getattr(self, name)
             require(is_int_at_least(value, 1, numpy_ints=False), f"{c}.{name}", value, "an integer >= 1")
@@ -155,10 +156,13 @@ def make_training_env(config: TrainConfig, rank: int, flat: bool = True,
 
 
 def _vec_env(config: TrainConfig, flat: bool, seed: int, finetune: bool = False):
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from trade_gym.agents.vec_env import GroupedSubprocVecEnv
 
     fns = [make_training_env(config, rank, flat, finetune) for rank in range(config.n_envs)]
-    vec_env = SubprocVecEnv(fns, start_method="spawn") if config.n_envs > 1 else DummyVecEnv(fns)
+    workers = min(config.n_workers, config.n_envs)
+    vec_env = GroupedSubprocVecEnv(fns, workers) if workers > 1 else DummyVecEnv(fns)
     vec_env.seed(seed)
     return vec_env
 
@@ -349,7 +353,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--hyperparams", type=Path, default=None, metavar="YML",
                         help="hyperparameter file (default: agents/hyperparams/<algo>.yml)")
     parser.add_argument("--steps", type=int, default=None, help="environment steps in total")
-    parser.add_argument("--n-envs", type=int, default=None, help="SubprocVecEnv workers")
+    parser.add_argument("--n-envs", type=int, default=None, help="training envs in total")
+    parser.add_argument("--n-workers", type=int, default=None, help="processes the envs step in")
     parser.add_argument("--seed", type=int, default=None)
     parser.add_argument("--scenes", nargs="+", default=None, choices=SCENE_NAMES)
     parser.add_argument("--episode-duration-s", type=float, default=None)
@@ -371,7 +376,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     config = load_train_config(args.hyperparams or hyperparams_path(args.algo or DEFAULT_ALGO))
     if args.algo is not None and config.algo != args.algo:
         raise ValueError(f"--algo {args.algo} contradicts {args.hyperparams} (algo: {config.algo})")
-    overrides = {"total_steps": args.steps, "n_envs": args.n_envs, "seed": args.seed,
+    overrides = {"total_steps": args.steps, "n_envs": args.n_envs, "n_workers": args.n_workers, "seed": args.seed,
                  "scenes": tuple(args.scenes) if args.scenes else None,
                  "episode_duration_s": args.episode_duration_s, "tensorboard_dir": args.tensorboard,
                  "checkpoint_every_steps": args.checkpoint_every, "verbose": args.verbose,

@@ -36,8 +36,9 @@ PPO_FIELDS = (("n_envs", "n_envs"), ("n_timesteps", "total_steps"), ("learning_r
 OTHER_FILE_FIELDS = ("hidden_units", "log_std_init", "scenes", "target_motions", "decoy_tiers", "appearances",
                      "action_shaping", "env_kwargs", "episode_duration_s")
 # TrainConfig fields with no place in rl-zoo3's file: the stages rl-zoo3 does not have, and the settings that are
-# rl-zoo3's command-line flags (`zoo_command`) or belong to the SAC trainer
-NOT_IN_FILE = ("algo", "seed", "warm_start", "critic_warmup_steps", "finetune_steps", "finetune_env_kwargs",
+# rl-zoo3's command-line flags (`zoo_command`) or belong to the SAC trainer; n_workers: rl-zoo3's subproc VecEnv runs
+# one env per process
+NOT_IN_FILE = ("algo", "seed", "n_workers", "warm_start", "critic_warmup_steps", "finetune_steps", "finetune_env_kwargs",
                "torch_threads", "progress_bar", "tensorboard_dir", "checkpoint_every_steps", "verbose",
                "sac_buffer_size", "sac_learning_starts", "sac_gradient_steps")
 

@@ -77,7 +77,7 @@ def test_train_record_holds_steps_hash_and_export_check(tiny_run):
 @pytest.mark.parametrize("kwargs, field", [
     ({"algo": "a2c"}, "algo"), ({"total_steps": 0}, "total_steps"), ({"scenes": ("moon",)}, "scenes"),
     ({"gamma": 1.5}, "gamma"), ({"ent_coef": -1.0}, "ent_coef"), ({"algo": "sac"}, "warm_start"),
-    ({"n_envs": 1.5}, "n_envs"), ({"hidden_units": ()}, "hidden_units"),
+    ({"n_envs": 1.5}, "n_envs"), ({"n_workers": 0}, "n_workers"), ({"hidden_units": ()}, "hidden_units"),
     ({"target_motions": ("teleport",)}, "target_motions"), ({"decoy_tiers": ()}, "decoy_tiers"),
     ({"appearances": ("sepia",)}, "appearances"), ({"finetune_steps": -1}, "finetune_steps"),
     ({"action_shaping": 1}, "action_shaping"),
