@@ -1,7 +1,7 @@
 """The paper's scripted follower: hold height and yaw, move horizontally to keep the target centred.
 
 It sees only the observation: the filtered target position and velocity relative to the
-drone (heading frame). The height held is the height above the target at episode start.
+drone (heading frame). The height held is the height above the target at the episode's first 3D estimate.
 """
 
 from __future__ import annotations
