@@ -56,7 +56,9 @@ def _render_ms(env: TradeFollowEnv, pose: Pose, frames: int) -> float:
 
 
 def _env(scene: str, side_px: int, seed: int, renderer: str) -> tuple[TradeFollowEnv, Pose]:
-    env = TradeFollowEnv(scene=scene, perception="oracle", camera_size=side_px, renderer=renderer)
+    # frames asked for: an oracle env that renders none is built undrawn (no visual shapes)
+    env = TradeFollowEnv(scene=scene, perception="oracle", camera_size=side_px, renderer=renderer,
+                         render_oracle_frames=True)
     env.reset(seed=seed)
     return env, env._true_camera_pose()
 

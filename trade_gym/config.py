@@ -136,7 +136,9 @@ class EnvConfig:
     # No 3D position/velocity this long after reset [s] (fitted: FITTED_FIRST_FIX_DELAY_S, not the default)
     oracle_first_fix_delay_s: float = OracleConfig.first_fix_delay_s
     imu_noise: bool = True
-    render_oracle_frames: bool = False  # render the camera even in oracle mode (for the GT box)
+    # render the camera even in oracle mode (for the GT box). An oracle env without frames (and without render_mode)
+    # builds its world undrawn, without visual shapes (`trade_gym.sim.world.BodyLooks`): ask for frames to render it
+    render_oracle_frames: bool = False
     # Perception latency (`trade_gym.latency`): "none" (the estimate of a frame is in that frame's observation),
     # "fixed" (it arrives perception_latency_ms after its frame) or "measured" (after perception's wall-clock
     # compute time for that frame: not deterministic). perception_latency_ms only with "fixed" [ms].

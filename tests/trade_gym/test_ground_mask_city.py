@@ -87,20 +87,24 @@ def test_ground_mask_city_frames_with_building_in_roi_mean_iou_at_least_0_8():
     so no tracking is needed); ROI corners from the pipeline's ROI tracker with closed-loop-like depth noise; the mask
     is the ground filter's (shipped depth model, alignment, segmentation)."""
     scores = []
+    # the flight needs no frames; the renders need the world drawn: an env that renders (the same world per seed)
     env = TradeFollowEnv(scene="city", perception="oracle", camera_size=256)
+    drawn = TradeFollowEnv(scene="city", perception="oracle", camera_size=256, render_oracle_frames=True)
     try:
         for seed in FAST_SEEDS:
             flight = oracle_flight(env, seed, FAST_FLIGHT_STEPS)
-            _, yaw = env.world.drone_start()  # the scripted follower holds its start yaw
-            ground_filter = GroundFilter(GroundFilterConfig(), env.camera.intrinsics, SingleImageDepth(),
+            drawn.reset(seed=seed)
+            _, yaw = drawn.world.drone_start()  # the scripted follower holds its start yaw
+            ground_filter = GroundFilter(GroundFilterConfig(), drawn.camera.intrinsics, SingleImageDepth(),
                                          np.random.default_rng(seed))
             rng = np.random.default_rng(seed)
             for t_s, position in flight[FAST_FRAME_EVERY - 1::FAST_FRAME_EVERY]:
-                score = mask_on_rendered_frame(env, ground_filter, t_s, position, yaw, rng)
+                score = mask_on_rendered_frame(drawn, ground_filter, t_s, position, yaw, rng)
                 if score is not None:
                     scores.append(score)
     finally:
         env.close()
+        drawn.close()
     ious = np.array([iou for iou, building in scores if building >= BUILDING_MIN_FRACTION])
     assert len(ious) >= 6, scores  # the building is in the ROI crop in 7 of the 50 scored frames (5 worlds)
     assert ious.mean() >= MIN_MEAN_IOU, (ious.mean(), scores)

@@ -7,7 +7,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from trade.geometry import CameraIntrinsics, quat_xyzw_to_matrix
+from trade.geometry import CameraIntrinsics, Pose, quat_xyzw_to_matrix
 from trade_gym.sim.bullet_lists import bullet_list
 from trade_gym.sim.desert import OVERTAKE_LATERAL_M
 from trade_gym.sim.meshes import rock_mesh
@@ -426,3 +426,10 @@ def test_an_undrawn_world_has_no_visual_shapes_and_the_same_colliders_and_rays(c
     assert n_bodies_u == n_bodies - len(drawn.body_ids_by_role["terrain"]) + 1  # the terrain as one body
     assert boxes_u == boxes
     assert {r for r, _ in rays} >= {"terrain"} and rays_u == rays
+
+
+def test_rendering_an_undrawn_world_raises_naming_the_way_to_draw_it(client):
+    world = _build(client, "desert", seed=3, rendered=False)
+    pose = Pose(np.eye(3), np.array([0.0, 0.0, 30.0]))
+    with pytest.raises(RuntimeError, match="render_oracle_frames"):
+        world.prepare_render(pose, CameraIntrinsics.from_fov(64, 64, FOV_DEG), 0.1, 100.0)

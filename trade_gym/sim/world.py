@@ -246,6 +246,9 @@ class World:
 
     def prepare_render(self, T_world_cam: Pose, K: CameraIntrinsics, near_m: float, far_m: float) -> None:
         """Leave the terrain tiles this camera cannot see out of its next render (`ViewCuller.update`)."""
+        if not self.drawn:
+            raise RuntimeError("this world was built undrawn (oracle perception without frames): make the env with "
+                               "render_oracle_frames=True (or a render_mode) to render it")
         self.culler.update(T_world_cam, K, near_m, far_m)
 
     def place_vehicle_bodies(self) -> None:
