@@ -1,7 +1,7 @@
 """Ground vehicles: box-built car/truck/tank meshes, kinematic motion along a path, terrain-hugging poses.
 
-Owns `VehicleModel`, `VehicleMotion` (and the `Motion` protocol), `Vehicle`, `terrain_pose` and the visual-only
-pybullet bodies.
+Owns `VehicleModel`, `VehicleMotion` (and the `Motion` protocol), `Vehicle` and `terrain_pose`; their visual-only
+pybullet bodies are built with the world (`trade_gym.sim.world.build_world`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,6 @@ from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
-import pybullet as p
 
 from trade_gym.sim.meshes import Mesh, box_mesh, merge_meshes
 from trade_gym.sim.spline import CatmullRomSpline
@@ -213,14 +212,3 @@ def terrain_pose(
     x_axis /= np.linalg.norm(x_axis, axis=1, keepdims=True)
     R = np.stack([x_axis, np.cross(n, x_axis), n], axis=-1)  # columns are the vehicle axes in world
     return np.column_stack([xy, z[:, 4]]) + half[:, 2:3] * n, R
-
-
-def create_vehicle_body(client_id: int, visual_shape_id: int, texture_id: int) -> int:
-    """Mass-0 body with a visual shape (none: -1, for a world never rendered) and no collision shape; a
-    maximal-coordinates (btRigidBody) body, which stepSimulation skips at a fraction of a fixed-base multibody's
-    cost."""
-    body = p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=visual_shape_id,
-                             useMaximalCoordinates=True, physicsClientId=client_id)
-    if visual_shape_id >= 0:
-        p.changeVisualShape(body, -1, textureUniqueId=texture_id, rgbaColor=[1, 1, 1, 1], physicsClientId=client_id)
-    return body

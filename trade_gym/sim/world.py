@@ -35,7 +35,7 @@ from trade_gym.sim.target_motion import TargetMotion, motion_summary
 from trade_gym.sim.terrain import Heightfield
 from trade_gym.sim.vehicle_poses import VehiclePoses
 from trade_gym.sim.vehicles import (
-    Motion, Vehicle, VehicleMotion, create_vehicle_body, vehicle_model,
+    Motion, Vehicle, VehicleMotion, vehicle_model,
 )
 
 FloatArray = npt.NDArray[np.float64]
@@ -107,11 +107,14 @@ def _tile_edges(cells: int, tiles: int) -> npt.NDArray[np.int64]:
     return np.round(np.linspace(0, cells, min(tiles, cells) + 1)).astype(np.int64)
 
 
-def _terrain_tiles(looks: BodyLooks, layout: SceneLayout, tiles_per_side: int) -> tuple[tuple[int, ...], ViewCuller]:
-    """The heightfield's textured grid mesh (triangulated like the collision surface) as tiles_per_side^2
-    tiles, each a body at the heightfield's origin; the first also carries the GEOM_HEIGHTFIELD collision.
+def _terrain_tiles(looks: BodyLooks, layout: SceneLayout) -> tuple[tuple[int, ...], ViewCuller]:
+    """The heightfield's textured grid mesh (triangulated like the collision surface) as TERRAIN_TILES_PER_SIDE^2
+    tiles, each a body at the heightfield's origin; the first also carries the GEOM_HEIGHTFIELD collision. An undrawn
+    world gets one tile (tiles pay only in renders; each costs stepSimulation a static body's update per substep).
     Returns the tile bodies and the culler that owns their colour."""
     cid, hf = looks.client_id, layout.terrain
+    tiles_per_side = TERRAIN_TILES_PER_SIDE if looks.drawn else 1
+    texture = looks.texture(layout.spec.ground_texture)
     ny, nx = hf.shape
     collision = p.createCollisionShape(p.GEOM_HEIGHTFIELD, meshScale=[hf.spacing_m, hf.spacing_m, 1.0],
                                        heightfieldData=bullet_list("heightfield", hf.heights_m.ravel()),
@@ -125,7 +128,7 @@ def _terrain_tiles(looks: BodyLooks, layout: SceneLayout, tiles_per_side: int) -
         for c0, c1 in itertools.pairwise(_tile_edges(nx - 1, tiles_per_side)):
             rows, cols = slice(r0, r1 + 1), slice(c0, c1 + 1)
             bodies.append(_static_body(cid, collision if not bodies else -1, tile_visual(rows, cols), base_position,
-                                       looks.texture(layout.spec.ground_texture)))
+                                       texture))
             heights = hf.heights_m[rows, cols]
             lo.append((hf.x_m[c0], hf.y_m[r0], float(heights.min())))
             hi.append((hf.x_m[c1], hf.y_m[r1], float(heights.max())))
@@ -377,7 +380,7 @@ def build_world(client_id: int, scene: str, rng: np.random.Generator, target_spe
     """Generate and build `scene` in a freshly reset pybullet client (same rng state -> same world); `decoys`
     picks which of the drawn decoys are built, `target_motion` how the target drives (drawn after the decoys).
     A world that is never `rendered` is built without visual shapes and textures (`BodyLooks`), its terrain as one
-    body (tiles pay only in renders; each costs stepSimulation a static body's update per substep)."""
+    body."""
     spec = get_scene(scene)
     speed = spec.target_speed_mps if target_speed_mps is None else float(target_speed_mps)
     if not np.isfinite(speed) or speed <= 0.0:
@@ -388,8 +391,7 @@ def build_world(client_id: int, scene: str, rng: np.random.Generator, target_spe
     names |= {"facade", "roof"} if len(layout.buildings_lo_m) else set()
     names |= {"dirt_road"} if layout.road is not None else set()
     looks = BodyLooks.load(client_id, rendered, names)
-    tiles_per_side = TERRAIN_TILES_PER_SIDE if rendered else 1
-    terrain_tiles, culler = _terrain_tiles(looks, layout, tiles_per_side)
+    terrain_tiles, culler = _terrain_tiles(looks, layout)
     roles = {
         "terrain": terrain_tiles,
         "boulders": (_boulder_body(looks, layout),) if layout.boulders else (),
@@ -399,8 +401,8 @@ def build_world(client_id: int, scene: str, rng: np.random.Generator, target_spe
     }
     shapes = {kind: looks.visual(vehicle_model(kind).mesh) for kind in sorted({spec.target_kind, spec.decoy_kind})}
 
-    def spawn(kind: str, motion: Motion) -> Vehicle:
-        body = create_vehicle_body(client_id, shapes[kind], looks.texture("vehicle_palette"))
+    def spawn(kind: str, motion: Motion) -> Vehicle:  # no collision shape: vehicles are kinematic and visual only
+        body = _static_body(client_id, -1, shapes[kind], texture_id=looks.texture("vehicle_palette"))
         return Vehicle(kind, body, vehicle_model(kind).half_extents_m, motion)
 
     target_half = vehicle_model(spec.target_kind).half_extents_m
