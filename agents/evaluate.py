@@ -54,7 +54,8 @@ def evaluate(model: Path, sha256: str, scenes: Sequence[str], worlds: Sequence[i
         try:
             followers: dict[str, Callable[[], ScriptedFollower | LearnedFollower]] = {
                 "scripted": lambda: ScriptedFollower(ScriptedFollowerConfig.of(env.config, env.action_scale)),
-                "learned": lambda: LearnedFollower(model, expected_sha256=sha256)}
+                "learned": lambda: LearnedFollower(model, expected_sha256=sha256, base_config=ScriptedFollowerConfig.of(
+                    env.config, env.action_scale))}
             runs = {name: [episode_scores(fly_episode(env, make(), w, steps)) for w in worlds]
                     for name, make in followers.items()}
         finally:

@@ -4,7 +4,8 @@ Owns `LearnedFollower` (SB3's `predict` shape, single or batched Dict observatio
 loader of the policy file and its errors (`PolicyModelError`, a subclass of `AgentError`).
 
 Soft start and gentle acceleration before the 3D fix: `trade_gym.agents.action_shaping` (the same shaping the
-training env applies).
+training env applies). A residual policy (its file says so, `trade_gym.agents.residual`) corrects the scripted
+follower's action instead of flying alone; the shaping then applies to its correction.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from trade_gym.action import ACTION_DIM
 from trade_gym.agents.action_shaping import (MAX_ACCEL_UNFIXED_MPS2, POLICY_SPEED_SCALE_MPS, SOFT_START_S,
                                              ActionShaping, ActionShapingConfig)
 from trade_gym.agents.obs_flatten import N_FEATURES, POSITION_KNOWN_INDEX, flatten_observation
+from trade_gym.agents.residual import combine, residual_scale_of
+from trade_gym.agents.scripted import ScriptedFollower, ScriptedFollowerConfig
 from trade_gym.assets import ASSETS_DIR
 
 DEFAULT_POLICY = ASSETS_DIR / "policies" / "follower_ppo.onnx"
@@ -46,15 +49,27 @@ class LearnedFollower:
     `soft_start_s=0` turns it off) and its last action (the acceleration limit before the 3D fix,
     `max_accel_unfixed_mps2=math.inf` turns it off), both in `trade_gym.agents.action_shaping`: `episode_start` True restarts an
     episode, and the first call after construction or `reset()` counts as a start. `state` is passed through unused.
-    `LearnedFollower(soft_start_s=0, max_accel_unfixed_mps2=math.inf)` runs the bare policy."""
+    `LearnedFollower(soft_start_s=0, max_accel_unfixed_mps2=math.inf)` runs the bare policy.
+
+    A residual policy file (`trade_gym.agents.residual`) flies `combine(scripted, shaped policy output, scale)`: the
+    scripted follower built with `base_config` (the env's camera and action scale,
+    `ScriptedFollowerConfig.of(env_config, env.action_scale)`; None: the defaults) keeps its per-env state alongside.
+    `residual_scale` is the file's reach, None for a policy that flies alone."""
 
     def __init__(self, model_path: str | Path = DEFAULT_POLICY, expected_sha256: str = DEFAULT_POLICY_SHA256,
-                 soft_start_s: float = SOFT_START_S, max_accel_unfixed_mps2: float = MAX_ACCEL_UNFIXED_MPS2) -> None:
+                 soft_start_s: float = SOFT_START_S, max_accel_unfixed_mps2: float = MAX_ACCEL_UNFIXED_MPS2,
+                 base_config: ScriptedFollowerConfig | None = None) -> None:
         check_sha256_format(expected_sha256)
         self.shaping = ActionShaping(ActionShapingConfig(soft_start_s, max_accel_unfixed_mps2))
         self.model_path = Path(model_path)
         self._session = open_verified_session(self.model_path, expected_sha256, "policy file", PolicyModelError)
         self._input_name = _check_io(self._session, self.model_path)
+        try:
+            self.residual_scale = residual_scale_of(self._session.get_modelmeta().custom_metadata_map,
+                                                    self.model_path)
+        except ValueError as exc:
+            raise PolicyModelError(str(exc)) from None
+        self._base = None if self.residual_scale is None else ScriptedFollower(base_config)
 
     @property
     def soft_start_s(self) -> float:
@@ -67,6 +82,8 @@ class LearnedFollower:
     def reset(self) -> None:
         """Forget the episodes' frame counts and last actions: the next call starts new episodes."""
         self.shaping.reset()
+        if self._base is not None:
+            self._base.reset()
 
     def predict(
         self,
@@ -80,6 +97,9 @@ class LearnedFollower:
         (action,) = self._session.run(None, {self._input_name: features})
         action = self.shaping.shape(np.asarray(action, dtype=np.float32), features[:, POSITION_KNOWN_INDEX] > 0.0,
                                     episode_start)
+        if self._base is not None and self.residual_scale is not None:
+            base, _ = self._base.predict(observation, episode_start=episode_start)
+            action = combine(np.asarray(base).reshape(action.shape), action, self.residual_scale)
         return (action if batched else action[0]), state
 
 def _check_io(session: ort.InferenceSession, path: Path) -> str:

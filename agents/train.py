@@ -24,7 +24,8 @@ import numpy as np
 from trade_gym.agents.learning_curve import curve_callback
 from trade_gym.agents.obs_flatten import FlatObservation
 from trade_gym.agents.action_shaping import ShapedAction
-from trade_gym.agents.training_env import ScenarioDraws, SceneRandomizedEnv, ZeroYawAction
+from trade_gym.agents.residual import check_residual_scale, residual_metadata
+from trade_gym.agents.training_env import ResidualAction, ScenarioDraws, SceneRandomizedEnv, ZeroYawAction
 from trade_gym.agents.warm_start import WarmStartConfig
 from trade_gym.bench.splits import require_training_worlds
 from trade.validation import check_choice, is_int_at_least, require
@@ -61,6 +62,9 @@ class TrainConfig:
     appearances: tuple[str, ...] = APPEARANCE_MODES
     # train under `LearnedFollower`'s soft start and acceleration limit (`ShapedAction`), as the policy will fly
     action_shaping: bool = True
+    # the policy's reach as a residual of the scripted follower (`trade_gym.agents.residual`: the env flies
+    # clip(scripted + residual_scale x policy, -1, 1), the shaping on the policy's part); None: the policy flies alone
+    residual_scale: float | None = None
     # after `total_steps`, PPO/SAC continues `finetune_steps` more steps with `finetune_env_kwargs` on top of
     # `env_kwargs` (e.g. the TRADE stack itself at a small camera: its losses, which the oracle does not have)
     finetune_steps: int = 100_000
@@ -124,6 +128,11 @@ class TrainConfig:
         require(is_int_at_least(self.finetune_steps, 0, numpy_ints=False), f"{c}.finetune_steps", self.finetune_steps,
                 "an integer >= 0")
         require(isinstance(self.action_shaping, bool), f"{c}.action_shaping", self.action_shaping, "a bool")
+        if self.residual_scale is not None:
+            check_residual_scale(self.residual_scale, f"{c}.residual_scale")
+            if self.warm_start is not None:  # the clone is of the scripted follower, which a residual adds to
+                raise ValueError("TrainConfig.residual_scale needs warm_start=None (a residual starts at the "
+                                 "scripted follower's actions already)")
         world_seed = dict(self.env_kwargs).get("world_seed")
         if world_seed is not None:  # training draws its worlds from the training split; a fixed one must be too
             require_training_worlds([world_seed], "TrainConfig.env_kwargs world_seed")
@@ -136,7 +145,8 @@ class TrainConfig:
 
 def make_training_env(config: TrainConfig, rank: int, flat: bool = True,
                        finetune: bool = False) -> Callable[[], gym.Env]:
-    """Factory of worker `rank`'s env: scene- and scenario-randomised, the action shaping (`action_shaping`), then
+    """Factory of worker `rank`'s env: scene- and scenario-randomised, the residual (`residual_scale`; for the learner)
+    and the action shaping (`action_shaping`), then
     (flat=True, for the learner) zero yaw, flat features and an episode monitor; flat=False keeps the Dict
     observation (for the scripted demonstrator). `finetune`: with `finetune_env_kwargs` on top."""
     from stable_baselines3.common.monitor import Monitor
@@ -148,6 +158,8 @@ def make_training_env(config: TrainConfig, rank: int, flat: bool = True,
         # SB3 seeds worker `rank`'s first reset with seed + rank, which fixes its whole stream of draws
         env: gym.Env = SceneRandomizedEnv(config.scenes, scenarios, episode_duration_s=config.episode_duration_s,
                                           **kwargs)
+        if config.residual_scale is not None:
+            env = ResidualAction(env, config.residual_scale)
         if config.action_shaping:
             env = ShapedAction(env)
         return Monitor(FlatObservation(ZeroYawAction(env))) if flat else env
@@ -165,6 +177,11 @@ def _vec_env(config: TrainConfig, flat: bool, seed: int, finetune: bool = False)
     vec_env = GroupedSubprocVecEnv(fns, workers) if workers > 1 else DummyVecEnv(fns)
     vec_env.seed(seed)
     return vec_env
+
+
+def policy_metadata(config: TrainConfig) -> dict[str, str] | None:
+    """The policy file's metadata entries: a residual's (`residual_metadata`), else none."""
+    return None if config.residual_scale is None else residual_metadata(config.residual_scale)
 
 
 def _progress_bar_available() -> bool:
@@ -240,7 +257,7 @@ def _finetune(model, config: TrainConfig, callback, out: Path) -> dict:
     returns the stage's record."""
     from trade_gym.agents.export import export_onnx
 
-    before = export_onnx(model, out / "policy_before_finetune.onnx")
+    before = export_onnx(model, out / "policy_before_finetune.onnx", policy_metadata(config))
     start_steps, start = model.num_timesteps, time.perf_counter()
     # its own seed stream (seed + 1): the fine-tune's worlds and scenarios are not a replay of the first ones
     vec_env = _vec_env(config, flat=True, seed=config.seed + 1, finetune=True)
@@ -286,7 +303,7 @@ def train(config: TrainConfig, out_dir: str | Path) -> dict:
         finetune = _finetune(model, config, callback, out)
     wall_s = time.perf_counter() - start
     model.save(out / "model.zip")
-    digest = export_onnx(model, out / "policy.onnx")
+    digest = export_onnx(model, out / "policy.onnx", policy_metadata(config))
     record = {
         "config": asdict(config),
         "steps": int(model.num_timesteps),
@@ -362,6 +379,8 @@ def _parser() -> argparse.ArgumentParser:
                         help="extra gym.make kwarg (repeatable), e.g. --env oracle_dropout_prob=0.1")
     parser.add_argument("--finetune-steps", type=int, default=None, help="steps on finetune_env_kwargs after training")
     parser.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
+    parser.add_argument("--residual-scale", type=float, default=None, metavar="SCALE",
+                        help="train a residual of the scripted follower with this reach (needs --from-scratch)")
     parser.add_argument("--from-scratch", action="store_true",
                         help="no warm start and no critic warm-up: PPO from a random initialisation")
     parser.add_argument("--demo-steps", type=int, default=None, help="scripted demonstrations for the warm start")
@@ -380,7 +399,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
                  "scenes": tuple(args.scenes) if args.scenes else None,
                  "episode_duration_s": args.episode_duration_s, "tensorboard_dir": args.tensorboard,
                  "checkpoint_every_steps": args.checkpoint_every, "verbose": args.verbose,
-                 "finetune_steps": args.finetune_steps}
+                 "finetune_steps": args.finetune_steps, "residual_scale": args.residual_scale}
     changes = {k: v for k, v in overrides.items() if v is not None}
     if args.env:
         changes["env_kwargs"] = tuple((dict(config.env_kwargs) | dict(args.env)).items())

@@ -1,6 +1,7 @@
 """The training env of learned followers: TradeFollow-v0 (its own reward) with the scene, the world seed and the
 scenario (target motion, decoy tier, appearance) drawn per episode (`EpisodeDraws`, a wrapper of any TradeFollow-v0,
-as rl-zoo3's `env_wrapper` composes it), and the 3-D action that holds the yaw rate at zero.
+as rl-zoo3's `env_wrapper` composes it), the 3-D action that holds the yaw rate at zero, and the residual action
+(`ResidualAction`: the policy's action added to the scripted follower's).
 """
 
 from __future__ import annotations
@@ -15,6 +16,8 @@ from gymnasium.utils import seeding
 
 from trade.validation import require
 from trade_gym.action import ACTION_NAMES, action_space
+from trade_gym.agents.residual import check_residual_scale, combine
+from trade_gym.agents.scripted import ScriptedFollower, ScriptedFollowerConfig
 from trade_gym.bench.splits import TRAINING
 from trade_gym.config import SCENE_NAMES
 from trade_gym.env import TradeFollowEnv
@@ -120,3 +123,33 @@ class ZeroYawAction(gym.ActionWrapper):
 
     def action(self, action: np.ndarray) -> np.ndarray:
         return np.append(np.asarray(action, np.float32), np.float32(0.0))
+
+
+class ResidualAction(gym.Wrapper):
+    """A TradeFollow env whose action is the residual: the env receives `combine(scripted, action, scale)`, the
+    scripted follower (with the env's camera and action scale) acting on the last observation, restarted with each
+    episode, as `LearnedFollower` flies a residual policy (`trade_gym.agents.residual`)."""
+
+    def __init__(self, env: gym.Env, scale: float) -> None:
+        super().__init__(env)
+        self.scale = check_residual_scale(scale)
+        unwrapped = env.unwrapped
+        if not isinstance(unwrapped, TradeFollowEnv):
+            raise TypeError(f"ResidualAction wraps a TradeFollow env, got {type(unwrapped).__name__}")
+        self.base = ScriptedFollower(ScriptedFollowerConfig.of(unwrapped.config, unwrapped.action_scale))
+        self._obs: dict[str, np.ndarray] | None = None
+        self._start = True
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._obs, self._start = obs, True
+        return obs, info
+
+    def step(self, action):
+        if self._obs is None:
+            raise RuntimeError("step() called before reset()")
+        base, _ = self.base.predict(self._obs, episode_start=np.array([self._start]))
+        self._start = False
+        obs, reward, terminated, truncated, info = self.env.step(combine(base, action, self.scale))
+        self._obs = obs
+        return obs, reward, terminated, truncated, info

@@ -3,9 +3,9 @@ the two cannot drift: `python -m trade_gym.agents.zoo` writes agents/hyperparams
 a stale one.
 
 rl-zoo3 makes the env with `gym.make("TradeFollow-v0", **env_kwargs)` and applies `env_wrapper` in order; the file's
-wrappers compose around it what `trade_gym.agents.train.make_training_env` composes (`EpisodeDraws`, `ShapedAction`,
-`ZeroYawAction`, `FlatObservation`). rl-zoo3 has no warm start, critic warm-up or fine-tune stage: the file trains
-as `python -m trade_gym.agents.train --from-scratch --finetune-steps 0` does.
+wrappers compose around it what `trade_gym.agents.train.make_training_env` composes (`EpisodeDraws`, `ResidualAction`
+for a residual policy, `ShapedAction`, `ZeroYawAction`, `FlatObservation`). rl-zoo3 has no warm start, critic warm-up
+or fine-tune stage: the file trains as `python -m trade_gym.agents.train --from-scratch --finetune-steps 0` does.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ ZOO_DIR = HYPERPARAMS_DIR / "rl_zoo3"  # rl-zoo3's layout: one <algo>.yml keyed 
 ZOO_ALGOS = ("ppo",)  # the shipped policy's algorithm; SAC's TrainConfig is untuned (sac.yml)
 EPISODE_DRAWS = "trade_gym.agents.training_env.EpisodeDraws"
 SHAPED_ACTION = "trade_gym.agents.action_shaping.ShapedAction"
+RESIDUAL_ACTION = "trade_gym.agents.training_env.ResidualAction"
 ZERO_YAW = "trade_gym.agents.training_env.ZeroYawAction"
 FLAT_OBSERVATION = "trade_gym.agents.obs_flatten.FlatObservation"
 
@@ -34,7 +35,7 @@ PPO_FIELDS = (("n_envs", "n_envs"), ("n_timesteps", "total_steps"), ("learning_r
               ("ent_coef", "ent_coef"), ("use_sde", "use_sde"), ("sde_sample_freq", "sde_sample_freq"))
 # the TrainConfig fields in the file besides PPO_FIELDS (policy_kwargs, env_wrapper, env_kwargs)
 OTHER_FILE_FIELDS = ("hidden_units", "log_std_init", "scenes", "target_motions", "decoy_tiers", "appearances",
-                     "action_shaping", "env_kwargs", "episode_duration_s")
+                     "action_shaping", "residual_scale", "env_kwargs", "episode_duration_s")
 # TrainConfig fields with no place in rl-zoo3's file: the stages rl-zoo3 does not have, and the settings that are
 # rl-zoo3's command-line flags (`zoo_command`) or belong to the SAC trainer; n_workers: rl-zoo3's subproc VecEnv runs
 # one env per process
@@ -60,8 +61,9 @@ def env_wrappers(config: TrainConfig) -> list[Any]:
     around the made env), innermost first."""
     draws = {"scenes": list(config.scenes), "target_motions": list(config.target_motions),
              "decoy_tiers": list(config.decoy_tiers), "appearances": list(config.appearances)}
+    residual = [] if config.residual_scale is None else [{RESIDUAL_ACTION: {"scale": config.residual_scale}}]
     shaping = [SHAPED_ACTION] if config.action_shaping else []
-    return [{EPISODE_DRAWS: draws}, *shaping, ZERO_YAW, FLAT_OBSERVATION]
+    return [{EPISODE_DRAWS: draws}, *residual, *shaping, ZERO_YAW, FLAT_OBSERVATION]
 
 
 def zoo_command(config: TrainConfig, conf_file: str) -> list[str]:

@@ -86,5 +86,5 @@ def make_policy(name: str, seed: int, camera_pitch_deg: float, action_scale: Act
     if name == "learned":
         from trade_gym.agents.learned import LearnedFollower
 
-        return LearnedFollower()
+        return LearnedFollower(base_config=ScriptedFollowerConfig.of(config, action_scale))
     raise ValueError(f"policy must be one of {POLICY_NAMES}, got {name!r}")
