@@ -52,10 +52,10 @@ def evaluate(model: Path, sha256: str, scenes: Sequence[str], worlds: Sequence[i
     for scene in scenes:
         env = TradeFollowEnv(scene=scene, episode_duration_s=steps / CAMERA_RATE_HZ, **env_kwargs)
         try:
+            scripted = ScriptedFollowerConfig.of(env.config, env.action_scale)  # also a residual policy's base
             followers: dict[str, Callable[[], ScriptedFollower | LearnedFollower]] = {
-                "scripted": lambda: ScriptedFollower(ScriptedFollowerConfig.of(env.config, env.action_scale)),
-                "learned": lambda: LearnedFollower(model, expected_sha256=sha256, base_config=ScriptedFollowerConfig.of(
-                    env.config, env.action_scale))}
+                "scripted": lambda: ScriptedFollower(scripted),
+                "learned": lambda: LearnedFollower(model, expected_sha256=sha256, base_config=scripted)}
             runs = {name: [episode_scores(fly_episode(env, make(), w, steps)) for w in worlds]
                     for name, make in followers.items()}
         finally:

@@ -69,7 +69,8 @@ class LearnedFollower:
                                                     self.model_path)
         except ValueError as exc:
             raise PolicyModelError(str(exc)) from None
-        self._base = None if self.residual_scale is None else ScriptedFollower(base_config)
+        # the scripted follower a residual policy corrects, and the policy's reach
+        self._residual = None if self.residual_scale is None else (ScriptedFollower(base_config), self.residual_scale)
 
     @property
     def soft_start_s(self) -> float:
@@ -82,8 +83,8 @@ class LearnedFollower:
     def reset(self) -> None:
         """Forget the episodes' frame counts and last actions: the next call starts new episodes."""
         self.shaping.reset()
-        if self._base is not None:
-            self._base.reset()
+        if self._residual is not None:
+            self._residual[0].reset()
 
     def predict(
         self,
@@ -97,9 +98,10 @@ class LearnedFollower:
         (action,) = self._session.run(None, {self._input_name: features})
         action = self.shaping.shape(np.asarray(action, dtype=np.float32), features[:, POSITION_KNOWN_INDEX] > 0.0,
                                     episode_start)
-        if self._base is not None and self.residual_scale is not None:
-            base, _ = self._base.predict(observation, episode_start=episode_start)
-            action = combine(np.asarray(base).reshape(action.shape), action, self.residual_scale)
+        if self._residual is not None:
+            scripted, scale = self._residual
+            base, _ = scripted.predict(observation, episode_start=episode_start)
+            action = combine(np.asarray(base).reshape(action.shape), action, scale)
         return (action if batched else action[0]), state
 
 def _check_io(session: ort.InferenceSession, path: Path) -> str:

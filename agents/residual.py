@@ -55,7 +55,7 @@ def residual_scale_of(metadata: Mapping[str, str], path: str | Path) -> float | 
     try:
         scale = float(text)
     except ValueError:
-        raise ValueError(f"policy file {path}: {SCALE_KEY} must be a number, got {text!r}") from None
-    if not (math.isfinite(scale) and scale > 0.0):
+        scale = math.nan
+    if not is_positive_number(scale):
         raise ValueError(f"policy file {path}: {SCALE_KEY} must be a finite number > 0, got {text!r}")
     return scale

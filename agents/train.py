@@ -145,8 +145,8 @@ class TrainConfig:
 
 def make_training_env(config: TrainConfig, rank: int, flat: bool = True,
                        finetune: bool = False) -> Callable[[], gym.Env]:
-    """Factory of worker `rank`'s env: scene- and scenario-randomised, the residual (`residual_scale`; for the learner)
-    and the action shaping (`action_shaping`), then
+    """Factory of worker `rank`'s env: scene- and scenario-randomised, the residual (`residual_scale`) and the action
+    shaping (`action_shaping`), then
     (flat=True, for the learner) zero yaw, flat features and an episode monitor; flat=False keeps the Dict
     observation (for the scripted demonstrator). `finetune`: with `finetune_env_kwargs` on top."""
     from stable_baselines3.common.monitor import Monitor
