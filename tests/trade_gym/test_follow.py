@@ -151,3 +151,22 @@ def test_config_of_an_env_takes_its_camera_and_action_scale():
 def test_bad_follower_setting_raises_naming_it(kwargs, field):
     with pytest.raises(ValueError, match=field):
         ScriptedFollowerConfig(**kwargs)
+
+
+def _below(height_m: float) -> dict[str, np.ndarray]:
+    """A 3D estimate with the target right below at `height_m`, standing still."""
+    return {**_fixed((0.0, 0.0)), "target_pos_rel_m": np.array([0.0, 0.0, -height_m], np.float32)}
+
+
+def test_the_height_to_hold_follows_the_estimate_through_the_hand_over_then_is_kept():
+    """After a servo, a first estimate 4x too close (8 m) corrected to 32 m within the hand-over: no descent towards
+    8 m; the height at the hand-over's end is held (a later estimate higher up brings the drone down to it)."""
+    config = ScriptedFollowerConfig()
+    policy = ScriptedFollower(config)
+    for k in range(10):
+        policy.predict(_unfixed((0.5, 0.3)), episode_start=np.array([k == 0]))
+    frames = round(config.handover_s * CAMERA_RATE_HZ)
+    ups = [policy.predict(_below(8.0 if k < 10 else 32.0))[0][2] for k in range(frames + 1)]
+    np.testing.assert_array_equal(ups, 0.0)  # the held height is the estimate's: no vertical command
+    up = policy.predict(_below(33.0))[0][2]  # after the hand-over: 33 m against the 32 m held
+    assert up == pytest.approx(-config.height_gain_per_s * 1.0 / config.max_speed_vertical_mps, rel=1e-5)
