@@ -3,7 +3,7 @@
 The graph maps features (N, N_FEATURES) float32 to actions (N, 4) float32: the deterministic action
 (PPO: the Gaussian mean clipped to [-1, 1]; SAC: tanh of the mean), with a zero yaw rate appended when
 the policy was trained on the 3-D (forward, left, up) action. A residual policy's file carries its metadata
-(`trade_gym.agents.residual.residual_metadata`). Training extras only: imports torch.
+(`trade_gym.agents.residual.Residual.metadata`). Training extras only: imports torch.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from stable_baselines3.sac.policies import SACPolicy
 
 from trade_gym.action import ACTION_DIM
 from trade_gym.agents.obs_flatten import N_FEATURES
-from trade_gym.agents.residual import residual_metadata
+from trade_gym.agents.residual import POLICY_AXES, Residual
 
 OPSET = 17  # supported by the venv's onnxruntime (1.17+ runs opset <= 20)
 INPUT_NAME = "features"
@@ -72,7 +72,7 @@ class DeterministicActor(torch.nn.Module):
 
 def export_onnx(model: BaseAlgorithm, path: str | Path, metadata: dict[str, str] | None = None) -> str:
     """Write the deterministic actor of `model` to `path` (dynamic batch) with the model `metadata` entries (e.g.
-    `residual_metadata`); returns the file's SHA-256."""
+    `Residual.metadata`); returns the file's SHA-256."""
     if model.observation_space.shape != (N_FEATURES,):
         raise ValueError(f"model observes {model.observation_space.shape}, expected ({N_FEATURES},) features")
     path = Path(path)
@@ -123,9 +123,11 @@ def main() -> None:
     parser.add_argument("--algo", choices=("ppo", "sac"), default="ppo")
     parser.add_argument("--residual-scale", type=float, default=None,
                         help="the model was trained as a residual of the scripted follower with this reach")
+    parser.add_argument("--residual-axes", nargs="+", default=list(POLICY_AXES), choices=POLICY_AXES, metavar="AXIS",
+                        help="the action axes the residual corrects (TrainConfig.residual_axes)")
     args = parser.parse_args()
     model = (PPO if args.algo == "ppo" else SAC).load(args.model, device="cpu")
-    metadata = None if args.residual_scale is None else residual_metadata(args.residual_scale)
+    metadata = None if args.residual_scale is None else Residual(args.residual_scale, tuple(args.residual_axes)).metadata()
     digest = export_onnx(model, args.out, metadata)
     error = max_export_error(model, args.out, np.random.default_rng(0))
     print(f"wrote {args.out} ({args.out.stat().st_size} bytes), SHA-256 {digest}, max |onnx - sb3| = {error:.2e}")

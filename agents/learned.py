@@ -21,7 +21,7 @@ from trade_gym.action import ACTION_DIM
 from trade_gym.agents.action_shaping import (MAX_ACCEL_UNFIXED_MPS2, POLICY_SPEED_SCALE_MPS, SOFT_START_S,
                                              ActionShaping, ActionShapingConfig)
 from trade_gym.agents.obs_flatten import N_FEATURES, POSITION_KNOWN_INDEX, flatten_observation
-from trade_gym.agents.residual import combine, residual_scale_of
+from trade_gym.agents.residual import Residual
 from trade_gym.agents.scripted import ScriptedFollower, ScriptedFollowerConfig
 from trade_gym.assets import ASSETS_DIR
 
@@ -51,10 +51,10 @@ class LearnedFollower:
     episode, and the first call after construction or `reset()` counts as a start. `state` is passed through unused.
     `LearnedFollower(soft_start_s=0, max_accel_unfixed_mps2=math.inf)` runs the bare policy.
 
-    A residual policy file (`trade_gym.agents.residual`) flies `combine(scripted, shaped policy output, scale)`: the
-    scripted follower built with `base_config` (the env's camera and action scale,
+    A residual policy file (`trade_gym.agents.residual`) flies `residual.combine(scripted, shaped policy output)`:
+    the scripted follower built with `base_config` (the env's camera and action scale,
     `ScriptedFollowerConfig.of(env_config, env.action_scale)`; None: the defaults) keeps its per-env state alongside.
-    `residual_scale` is the file's reach, None for a policy that flies alone."""
+    `residual` is the file's `Residual` (reach and axes), None for a policy that flies alone."""
 
     def __init__(self, model_path: str | Path = DEFAULT_POLICY, expected_sha256: str = DEFAULT_POLICY_SHA256,
                  soft_start_s: float = SOFT_START_S, max_accel_unfixed_mps2: float = MAX_ACCEL_UNFIXED_MPS2,
@@ -65,12 +65,16 @@ class LearnedFollower:
         self._session = open_verified_session(self.model_path, expected_sha256, "policy file", PolicyModelError)
         self._input_name = _check_io(self._session, self.model_path)
         try:
-            self.residual_scale = residual_scale_of(self._session.get_modelmeta().custom_metadata_map,
-                                                    self.model_path)
+            self.residual = Residual.of_metadata(self._session.get_modelmeta().custom_metadata_map, self.model_path)
         except ValueError as exc:
             raise PolicyModelError(str(exc)) from None
-        # the scripted follower a residual policy corrects, and the policy's reach
-        self._residual = None if self.residual_scale is None else (ScriptedFollower(base_config), self.residual_scale)
+        # the scripted follower a residual policy corrects, with the residual
+        self._residual = None if self.residual is None else (ScriptedFollower(base_config), self.residual)
+
+    @property
+    def residual_scale(self) -> float | None:
+        """The residual's reach, None for a policy that flies alone."""
+        return None if self.residual is None else self.residual.scale
 
     @property
     def soft_start_s(self) -> float:
@@ -99,9 +103,9 @@ class LearnedFollower:
         action = self.shaping.shape(np.asarray(action, dtype=np.float32), features[:, POSITION_KNOWN_INDEX] > 0.0,
                                     episode_start)
         if self._residual is not None:
-            scripted, scale = self._residual
+            scripted, residual = self._residual
             base, _ = scripted.predict(observation, episode_start=episode_start)
-            action = combine(np.asarray(base).reshape(action.shape), action, scale)
+            action = residual.combine(np.asarray(base).reshape(action.shape), action)
         return (action if batched else action[0]), state
 
 def _check_io(session: ort.InferenceSession, path: Path) -> str:

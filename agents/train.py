@@ -24,7 +24,7 @@ import numpy as np
 from trade_gym.agents.learning_curve import curve_callback
 from trade_gym.agents.obs_flatten import FlatObservation
 from trade_gym.agents.action_shaping import ShapedAction
-from trade_gym.agents.residual import check_residual_scale, residual_metadata
+from trade_gym.agents.residual import HORIZONTAL_AXES, POLICY_AXES, Residual, check_residual_axes, check_residual_scale
 from trade_gym.agents.training_env import ResidualAction, ScenarioDraws, SceneRandomizedEnv, ZeroYawAction
 from trade_gym.agents.warm_start import WarmStartConfig
 from trade_gym.bench.splits import require_training_worlds
@@ -65,6 +65,8 @@ class TrainConfig:
     # the policy's reach as a residual of the scripted follower (`trade_gym.agents.residual`: the env flies
     # clip(scripted + residual_scale x policy, -1, 1), the shaping on the policy's part); None: the policy flies alone
     residual_scale: float | None = None
+    # the action axes the residual corrects (`trade_gym.agents.residual.HORIZONTAL_AXES` says why not the height)
+    residual_axes: tuple[str, ...] = HORIZONTAL_AXES
     # after `total_steps`, PPO/SAC continues `finetune_steps` more steps with `finetune_env_kwargs` on top of
     # `env_kwargs` (e.g. the TRADE stack itself at a small camera: its losses, which the oracle does not have)
     finetune_steps: int = 100_000
@@ -130,12 +132,18 @@ class TrainConfig:
         require(isinstance(self.action_shaping, bool), f"{c}.action_shaping", self.action_shaping, "a bool")
         if self.residual_scale is not None:
             check_residual_scale(self.residual_scale, f"{c}.residual_scale")
+            check_residual_axes(self.residual_axes, f"{c}.residual_axes")
             if self.warm_start is not None:  # the clone is of the scripted follower, which a residual adds to
                 raise ValueError("TrainConfig.residual_scale needs warm_start=None (a residual starts at the "
                                  "scripted follower's actions already)")
         world_seed = dict(self.env_kwargs).get("world_seed")
         if world_seed is not None:  # training draws its worlds from the training split; a fixed one must be too
             require_training_worlds([world_seed], "TrainConfig.env_kwargs world_seed")
+
+    @property
+    def residual(self) -> Residual | None:
+        """The residual the policy is trained as (`residual_scale`, `residual_axes`), None when it flies alone."""
+        return None if self.residual_scale is None else Residual(self.residual_scale, self.residual_axes)
 
     @property
     def scenarios(self) -> ScenarioDraws:
@@ -159,7 +167,7 @@ def make_training_env(config: TrainConfig, rank: int, flat: bool = True,
         env: gym.Env = SceneRandomizedEnv(config.scenes, scenarios, episode_duration_s=config.episode_duration_s,
                                           **kwargs)
         if config.residual_scale is not None:
-            env = ResidualAction(env, config.residual_scale)
+            env = ResidualAction(env, config.residual_scale, config.residual_axes)
         if config.action_shaping:
             env = ShapedAction(env)
         return Monitor(FlatObservation(ZeroYawAction(env))) if flat else env
@@ -180,8 +188,9 @@ def _vec_env(config: TrainConfig, flat: bool, seed: int, finetune: bool = False)
 
 
 def policy_metadata(config: TrainConfig) -> dict[str, str] | None:
-    """The policy file's metadata entries: a residual's (`residual_metadata`), else none."""
-    return None if config.residual_scale is None else residual_metadata(config.residual_scale)
+    """The policy file's metadata entries: a residual's (`Residual.metadata`), else none."""
+    residual = config.residual
+    return None if residual is None else residual.metadata()
 
 
 def _progress_bar_available() -> bool:
@@ -351,7 +360,7 @@ def load_train_config(path: str | Path) -> TrainConfig:
                          f"missing {missing}")
     values = dict(data)
     values["scenes"], values["hidden_units"] = tuple(data["scenes"]), tuple(data["hidden_units"])
-    for name in ("target_motions", "decoy_tiers", "appearances"):
+    for name in ("target_motions", "decoy_tiers", "appearances", "residual_axes"):
         values[name] = tuple(data[name])
     for name in ("env_kwargs", "finetune_env_kwargs"):
         values[name] = tuple(dict(data[name] or {}).items())
@@ -381,6 +390,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--tensorboard", default=None, metavar="DIR", help="write TensorBoard logs to DIR")
     parser.add_argument("--residual-scale", type=float, default=None, metavar="SCALE",
                         help="train a residual of the scripted follower with this reach (needs --from-scratch)")
+    parser.add_argument("--residual-axes", nargs="+", default=None, choices=POLICY_AXES, metavar="AXIS",
+                        help=f"the action axes the residual corrects, of {' '.join(POLICY_AXES)}")
     parser.add_argument("--from-scratch", action="store_true",
                         help="no warm start and no critic warm-up: PPO from a random initialisation")
     parser.add_argument("--demo-steps", type=int, default=None, help="scripted demonstrations for the warm start")
@@ -399,7 +410,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
                  "scenes": tuple(args.scenes) if args.scenes else None,
                  "episode_duration_s": args.episode_duration_s, "tensorboard_dir": args.tensorboard,
                  "checkpoint_every_steps": args.checkpoint_every, "verbose": args.verbose,
-                 "finetune_steps": args.finetune_steps, "residual_scale": args.residual_scale}
+                 "finetune_steps": args.finetune_steps, "residual_scale": args.residual_scale,
+                 "residual_axes": tuple(args.residual_axes) if args.residual_axes else None}
     changes = {k: v for k, v in overrides.items() if v is not None}
     if args.env:
         changes["env_kwargs"] = tuple((dict(config.env_kwargs) | dict(args.env)).items())

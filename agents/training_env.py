@@ -16,7 +16,7 @@ from gymnasium.utils import seeding
 
 from trade.validation import require
 from trade_gym.action import ACTION_NAMES, action_space
-from trade_gym.agents.residual import check_residual_scale, combine
+from trade_gym.agents.residual import POLICY_AXES, Residual
 from trade_gym.agents.scripted import ScriptedFollower, ScriptedFollowerConfig
 from trade_gym.bench.splits import TRAINING
 from trade_gym.config import SCENE_NAMES
@@ -126,13 +126,13 @@ class ZeroYawAction(gym.ActionWrapper):
 
 
 class ResidualAction(gym.Wrapper):
-    """A TradeFollow env whose action is the residual: the env receives `combine(scripted, action, scale)`, the
-    scripted follower (with the env's camera and action scale) acting on the last observation, restarted with each
-    episode, as `LearnedFollower` flies a residual policy (`trade_gym.agents.residual`)."""
+    """A TradeFollow env whose action is the residual: the env receives `Residual(scale, axes).combine(scripted,
+    action)`, the scripted follower (with the env's camera and action scale) acting on the last observation,
+    restarted with each episode, as `LearnedFollower` flies a residual policy (`trade_gym.agents.residual`)."""
 
-    def __init__(self, env: gym.Env, scale: float) -> None:
+    def __init__(self, env: gym.Env, scale: float, axes: Sequence[str] = POLICY_AXES) -> None:
         super().__init__(env)
-        self.scale = check_residual_scale(scale)
+        self.residual = Residual(scale, tuple(axes))
         unwrapped = env.unwrapped
         if not isinstance(unwrapped, TradeFollowEnv):
             raise TypeError(f"ResidualAction wraps a TradeFollow env, got {type(unwrapped).__name__}")
@@ -150,6 +150,6 @@ class ResidualAction(gym.Wrapper):
             raise RuntimeError("step() called before reset()")
         base, _ = self.base.predict(self._obs, episode_start=np.array([self._start]))
         self._start = False
-        obs, reward, terminated, truncated, info = self.env.step(combine(base, action, self.scale))
+        obs, reward, terminated, truncated, info = self.env.step(self.residual.combine(base, action))
         self._obs = obs
         return obs, reward, terminated, truncated, info

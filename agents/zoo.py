@@ -35,7 +35,7 @@ PPO_FIELDS = (("n_envs", "n_envs"), ("n_timesteps", "total_steps"), ("learning_r
               ("ent_coef", "ent_coef"), ("use_sde", "use_sde"), ("sde_sample_freq", "sde_sample_freq"))
 # the TrainConfig fields in the file besides PPO_FIELDS (policy_kwargs, env_wrapper, env_kwargs)
 OTHER_FILE_FIELDS = ("hidden_units", "log_std_init", "scenes", "target_motions", "decoy_tiers", "appearances",
-                     "action_shaping", "residual_scale", "env_kwargs", "episode_duration_s")
+                     "action_shaping", "residual_scale", "residual_axes", "env_kwargs", "episode_duration_s")
 # TrainConfig fields with no place in rl-zoo3's file: the stages rl-zoo3 does not have, and the settings that are
 # rl-zoo3's command-line flags (`zoo_command`) or belong to the SAC trainer; n_workers: rl-zoo3's subproc VecEnv runs
 # one env per process
@@ -61,7 +61,8 @@ def env_wrappers(config: TrainConfig) -> list[Any]:
     around the made env), innermost first."""
     draws = {"scenes": list(config.scenes), "target_motions": list(config.target_motions),
              "decoy_tiers": list(config.decoy_tiers), "appearances": list(config.appearances)}
-    residual = [] if config.residual_scale is None else [{RESIDUAL_ACTION: {"scale": config.residual_scale}}]
+    residual = [] if config.residual_scale is None else [
+        {RESIDUAL_ACTION: {"scale": config.residual_scale, "axes": list(config.residual_axes)}}]
     shaping = [SHAPED_ACTION] if config.action_shaping else []
     return [{EPISODE_DRAWS: draws}, *residual, *shaping, ZERO_YAW, FLAT_OBSERVATION]
 

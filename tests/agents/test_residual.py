@@ -15,7 +15,7 @@ from onnx import TensorProto, helper, numpy_helper
 from trade_gym.action import ACTION_DIM
 from trade_gym.agents.learned import LearnedFollower, PolicyModelError
 from trade_gym.agents.obs_flatten import N_FEATURES
-from trade_gym.agents.residual import BASE_KEY, SCALE_KEY, combine, residual_metadata, residual_scale_of
+from trade_gym.agents.residual import AXES_KEY, BASE_KEY, POLICY_AXES, SCALE_KEY, Residual
 from trade_gym.agents.scripted import ScriptedFollower, ScriptedFollowerConfig
 from trade_gym.agents.train import TrainConfig, _parser, config_from_args, train
 from trade_gym.agents.training_env import ResidualAction
@@ -45,16 +45,22 @@ def constant_policy(path, action: list[float], metadata: dict[str, str] | None) 
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def test_combine_adds_the_scaled_residual_and_clips():
-    base = np.array([0.5, -0.9, 0.0, 0.0])
-    out = combine(base, np.array([1.0, -1.0, 0.5, 0.0]), 0.4)
-    np.testing.assert_allclose(out, [0.9, -1.0, 0.2, 0.0], atol=1e-7)
+def test_combine_adds_the_scaled_residual_on_its_axes_and_clips():
+    base = np.array([0.5, -0.9, 0.3, 0.0])
+    residual = np.array([1.0, -1.0, 0.5, 0.7])  # the yaw entry is never added: a policy does not command yaw
+    out = Residual(0.4).combine(base, residual)
+    np.testing.assert_allclose(out, [0.9, -1.0, 0.5, 0.0], atol=1e-7)
     assert out.dtype == np.float32
+    horizontal = Residual(0.4, ("forward", "left")).combine(np.stack([base, base]), np.stack([residual, residual]))
+    np.testing.assert_allclose(horizontal, [[0.9, -1.0, 0.3, 0.0]] * 2, atol=1e-7)  # the height is the base's
 
 
 def test_metadata_round_trip_and_a_plain_file_has_no_residual():
-    assert residual_scale_of(residual_metadata(0.35), "p.onnx") == 0.35
-    assert residual_scale_of({}, "p.onnx") is None
+    for residual in (Residual(0.35), Residual(0.35, ("left", "forward")), Residual(0.2, ("up",))):
+        assert Residual.of_metadata(residual.metadata(), "p.onnx") == residual
+    assert Residual.of_metadata({}, "p.onnx") is None
+    # a file from before the axes entry: its residual corrects every axis the policy outputs
+    assert Residual.of_metadata({BASE_KEY: "scripted", SCALE_KEY: "0.5"}, "p.onnx") == Residual(0.5, POLICY_AXES)
 
 
 @pytest.mark.parametrize("metadata, words", [
@@ -62,18 +68,30 @@ def test_metadata_round_trip_and_a_plain_file_has_no_residual():
     ({BASE_KEY: "scripted", SCALE_KEY: "wide"}, "'wide'"),
     ({BASE_KEY: "scripted", SCALE_KEY: "-1"}, "'-1'"),
     ({SCALE_KEY: "0.5"}, "None"),
+    ({AXES_KEY: "forward"}, "None"),
+    ({BASE_KEY: "scripted", SCALE_KEY: "0.5", AXES_KEY: "forward,yaw_rate"}, "'forward,yaw_rate'"),
+    ({BASE_KEY: "scripted", SCALE_KEY: "0.5", AXES_KEY: "left,left"}, "'left,left'"),
+    ({BASE_KEY: "scripted", SCALE_KEY: "0.5", AXES_KEY: ""}, "''"),
 ])
 def test_bad_metadata_raises_value_error_naming_file_and_value(metadata, words):
     with pytest.raises(ValueError, match=f"p.onnx.*{words}"):
-        residual_scale_of(metadata, "p.onnx")
+        Residual.of_metadata(metadata, "p.onnx")
 
 
 @pytest.mark.parametrize("bad", [0.0, -0.5, float("nan"), float("inf")])
 def test_bad_scale_raises_value_error_naming_it(bad):
     with pytest.raises(ValueError, match="residual_scale"):
-        residual_metadata(bad)
+        Residual(bad)
     with pytest.raises(ValueError, match="TrainConfig.residual_scale"):
         TrainConfig(residual_scale=bad, warm_start=None)
+
+
+@pytest.mark.parametrize("bad", [(), ("yaw_rate",), ("forward", "forward"), "forward", ("Forward",)])
+def test_bad_axes_raise_value_error_naming_them(bad):
+    with pytest.raises(ValueError, match="residual_axes"):
+        Residual(0.5, bad)
+    with pytest.raises(ValueError, match="TrainConfig.residual_axes"):
+        TrainConfig(residual_scale=0.5, residual_axes=bad, warm_start=None)
 
 
 def test_residual_refuses_a_warm_start():
@@ -83,7 +101,7 @@ def test_residual_refuses_a_warm_start():
 
 def test_zoo_file_wraps_the_residual_inside_the_shaping():
     wrappers = env_wrappers(TrainConfig(residual_scale=0.5, warm_start=None))
-    assert wrappers[1] == {RESIDUAL_ACTION: {"scale": 0.5}}
+    assert wrappers[1] == {RESIDUAL_ACTION: {"scale": 0.5, "axes": ["forward", "left"]}}
     assert RESIDUAL_ACTION not in str(env_wrappers(TrainConfig()))
 
 
@@ -109,25 +127,28 @@ def test_zero_residual_flies_the_scripted_follower_step_for_step():
 
 
 def test_learned_follower_on_a_residual_file_adds_the_shaped_residual_to_the_scripted_follower(tmp_path):
-    """A constant residual r, its shaping off: LearnedFollower's action is combine(scripted, r, scale) for single and
-    batched observations; a zero residual (shaped or not) is the scripted follower itself."""
+    """A constant residual r on the horizontal axes, its shaping off: LearnedFollower's action is
+    Residual(0.5, horizontal).combine(scripted, r) for single and batched observations; a zero residual (shaped or
+    not) is the scripted follower itself."""
     residual = [0.2, -0.1, 0.05, 0.0]
+    rule = Residual(0.5, ("forward", "left"))
     path = tmp_path / "residual.onnx"
-    sha = constant_policy(path, residual, residual_metadata(0.5))
+    sha = constant_policy(path, residual, rule.metadata())
     zero_path = tmp_path / "zero.onnx"
-    zero_sha = constant_policy(zero_path, [0.0] * ACTION_DIM, residual_metadata(0.5))
+    zero_sha = constant_policy(zero_path, [0.0] * ACTION_DIM, Residual(0.5).metadata())
     env = TradeFollowEnv(**ENV)
     config = ScriptedFollowerConfig.of(env.config, env.action_scale)
     learned = LearnedFollower(path, sha, soft_start_s=0.0, max_accel_unfixed_mps2=math.inf, base_config=config)
     zero = LearnedFollower(zero_path, zero_sha, base_config=config)
     scripted, reference = ScriptedFollower(config), ScriptedFollower(config)
-    assert learned.residual_scale == 0.5
+    assert learned.residual == rule and learned.residual_scale == 0.5
     try:
         obs, _ = env.reset(seed=5)
         for _ in range(STEPS):
             expected, _ = scripted.predict(obs)
             action, _ = learned.predict(obs)
-            np.testing.assert_allclose(action, combine(expected, np.array(residual), 0.5), atol=1e-6)
+            np.testing.assert_allclose(action, rule.combine(expected, np.array(residual)), atol=1e-6)
+            assert action[2] == expected[2]  # the height is the scripted follower's
             zero_action, _ = zero.predict(obs)
             np.testing.assert_array_equal(zero_action, reference.predict(obs)[0])
             obs, *_ = env.step(action)
@@ -137,7 +158,7 @@ def test_learned_follower_on_a_residual_file_adds_the_shaped_residual_to_the_scr
     batch = {k: np.stack([v, v]) for k, v in obs.items()}
     first, _ = ScriptedFollower(config).predict(obs)
     batched = LearnedFollower(path, sha, soft_start_s=0.0, max_accel_unfixed_mps2=math.inf, base_config=config)
-    np.testing.assert_allclose(batched.predict(batch)[0], np.stack([combine(first, np.array(residual), 0.5)] * 2),
+    np.testing.assert_allclose(batched.predict(batch)[0], np.stack([rule.combine(first, np.array(residual))] * 2),
                                atol=1e-6)
 
 
@@ -162,4 +183,4 @@ def test_training_a_residual_writes_a_residual_policy_file(tmp_path):
     assert record["max_abs_onnx_minus_sb3"] <= 1e-5
     for name, sha in (("policy.onnx", record["onnx_sha256"]),
                       ("policy_before_finetune.onnx", record["finetune"]["onnx_sha256_before"])):
-        assert LearnedFollower(tmp_path / name, sha).residual_scale == 0.4
+        assert LearnedFollower(tmp_path / name, sha).residual == Residual(0.4, ("forward", "left"))
