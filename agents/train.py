@@ -130,9 +130,9 @@ class TrainConfig:
         require(is_int_at_least(self.finetune_steps, 0, numpy_ints=False), f"{c}.finetune_steps", self.finetune_steps,
                 "an integer >= 0")
         require(isinstance(self.action_shaping, bool), f"{c}.action_shaping", self.action_shaping, "a bool")
+        check_residual_axes(self.residual_axes, f"{c}.residual_axes")  # named even while no residual is set
         if self.residual_scale is not None:
             check_residual_scale(self.residual_scale, f"{c}.residual_scale")
-            check_residual_axes(self.residual_axes, f"{c}.residual_axes")
             if self.warm_start is not None:  # the clone is of the scripted follower, which a residual adds to
                 raise ValueError("TrainConfig.residual_scale needs warm_start=None (a residual starts at the "
                                  "scripted follower's actions already)")

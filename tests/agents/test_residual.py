@@ -90,8 +90,9 @@ def test_bad_scale_raises_value_error_naming_it(bad):
 def test_bad_axes_raise_value_error_naming_them(bad):
     with pytest.raises(ValueError, match="residual_axes"):
         Residual(0.5, bad)
-    with pytest.raises(ValueError, match="TrainConfig.residual_axes"):
-        TrainConfig(residual_scale=0.5, residual_axes=bad, warm_start=None)
+    for scale in (0.5, None):
+        with pytest.raises(ValueError, match="TrainConfig.residual_axes"):
+            TrainConfig(residual_scale=scale, residual_axes=bad, warm_start=None)
 
 
 def test_residual_refuses_a_warm_start():
