@@ -65,16 +65,21 @@ class LearnedFollower:
         self._session = open_verified_session(self.model_path, expected_sha256, "policy file", PolicyModelError)
         self._input_name = _check_io(self._session, self.model_path)
         try:
-            self.residual = Residual.of_metadata(self._session.get_modelmeta().custom_metadata_map, self.model_path)
+            residual = Residual.of_metadata(self._session.get_modelmeta().custom_metadata_map, self.model_path)
         except ValueError as exc:
             raise PolicyModelError(str(exc)) from None
         # the scripted follower a residual policy corrects, with the residual
-        self._residual = None if self.residual is None else (ScriptedFollower(base_config), self.residual)
+        self._residual = None if residual is None else (ScriptedFollower(base_config), residual)
+
+    @property
+    def residual(self) -> Residual | None:
+        """The file's residual, None for a policy that flies alone."""
+        return None if self._residual is None else self._residual[1]
 
     @property
     def residual_scale(self) -> float | None:
         """The residual's reach, None for a policy that flies alone."""
-        return None if self.residual is None else self.residual.scale
+        return None if self._residual is None else self._residual[1].scale
 
     @property
     def soft_start_s(self) -> float:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from trade.validation import is_positive_number, require
-from trade_gym.action import ACTION_DIM, ACTION_HIGH, ACTION_LOW, ACTION_NAMES
+from trade_gym.action import ACTION_HIGH, ACTION_LOW, ACTION_NAMES
 
 BASE_KEY = "residual_base"  # ONNX metadata: the controller the policy corrects
 SCALE_KEY = "residual_scale"  # ONNX metadata: the policy's reach [action units per unit output]
@@ -63,7 +63,7 @@ class Residual:
     @property
     def mask(self) -> np.ndarray:
         """(ACTION_DIM,) 1.0 on the corrected axes, 0.0 elsewhere."""
-        return np.array([float(name in self.axes) for name in ACTION_NAMES[:ACTION_DIM]])
+        return np.array([float(name in self.axes) for name in ACTION_NAMES])
 
     def combine(self, base: np.ndarray, residual: np.ndarray) -> np.ndarray:
         """(N, 4) or (4,) float32 actions clip(base + scale mask residual, -1, 1)."""

@@ -15,7 +15,7 @@ import numpy as np
 from gymnasium.utils import seeding
 
 from trade.validation import require
-from trade_gym.action import ACTION_NAMES, action_space
+from trade_gym.action import action_space
 from trade_gym.agents.residual import POLICY_AXES, Residual
 from trade_gym.agents.scripted import ScriptedFollower, ScriptedFollowerConfig
 from trade_gym.bench.splits import TRAINING
@@ -27,7 +27,7 @@ from trade_gym.sim.target_motion import TARGET_MOTIONS
 
 # forward, left, up: the env's action without its last component, the yaw rate, held at 0 (rotating the image hurts
 # the tracker)
-TRAIN_ACTION_DIM = ACTION_NAMES.index("yaw_rate")
+TRAIN_ACTION_DIM = len(POLICY_AXES)
 
 
 @dataclass(frozen=True)
