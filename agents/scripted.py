@@ -3,6 +3,8 @@
 It sees only the observation: the filtered target position and velocity relative to the
 drone (heading frame). The height held is the height above the target at the end of the hand-over from the image
 servo (`ScriptedFollowerConfig.handover_s` after the episode's first 3D estimate; at that estimate when no servo ran).
+While the track is not valid (`track_valid` 0: the estimate coasts on the trajectory model) the drone holds the height
+it is at: a coasting estimate's vertical velocity is not measured.
 """
 
 from __future__ import annotations
@@ -96,6 +98,14 @@ def body_rates(observation: dict[str, np.ndarray], n: int) -> np.ndarray:
     return np.asarray(observation["imu"], dtype=np.float64).reshape(n, -1)[:, IMU_GYRO_COLUMNS]
 
 
+def track_valid(observation: dict[str, np.ndarray], n: int) -> np.ndarray:
+    """(n,) whether each observation's track is valid (`track_valid` 1); all True for an observation without
+    "track_valid" (a hand-built one: its estimate is then taken as measured)."""
+    if "track_valid" not in observation:
+        return np.ones(n, dtype=bool)
+    return np.asarray(observation["track_valid"], dtype=np.float64).reshape(n) > 0.5
+
+
 HANDED_OVER_FRAMES = 2 ** 62  # `_Episodes.fixed_frames` of an episode with no servo to hand over from
 
 
@@ -150,6 +160,7 @@ class ScriptedFollower:
         ep = self._episodes
         estimated = np.any(rel != 0.0, axis=1)  # a 3D estimate: from the episode's first one on
         rates = body_rates(observation, n)
+        tracked = track_valid(observation, n)
         actions = []
         for i in range(n):
             ep.attitude[i] = attitude_after(ep.attitude[i], rates[i], 1.0 / CAMERA_RATE_HZ)
@@ -162,12 +173,12 @@ class ScriptedFollower:
                 ep.hold_height_m[i] = -rel[i, 2]
             else:
                 ep.fixed_frames[i] += 1
-                if ep.fixed_frames[i] <= self._handover_frames:
+                if ep.fixed_frames[i] <= self._handover_frames and tracked[i]:
                     # the height to hold follows the estimate through the hand-over, then it is kept: the first
                     # ROI depths after a fast servo can be off several times for a few frames
                     ep.hold_height_m[i] = -rel[i, 2]
             feedforward = self._feedforward(vel[i], ep.servo[i], int(ep.fixed_frames[i]))
-            actions.append(self._act(rel[i], feedforward, ep.hold_height_m[i]))
+            actions.append(self._act(rel[i], feedforward, ep.hold_height_m[i], bool(tracked[i])))
         action = np.stack(actions).astype(np.float32)
         return (action if batched else action[0]), state
 
@@ -212,7 +223,11 @@ class ScriptedFollower:
             0.0,
         ])
 
-    def _act(self, rel: np.ndarray, vel: np.ndarray, hold_height_m: float) -> np.ndarray:
+    def _act(self, rel: np.ndarray, vel: np.ndarray, hold_height_m: float, tracked: bool) -> np.ndarray:
+        """The 3D law: horizontally, the target on the optical axis at the held height; vertically, the held height
+        above the target while the track is valid, and the height the drone is at while it is not (a coasting
+        estimate's vertical velocity is the trajectory model's, unmeasured: on city training world 10203 one sank at
+        1.3-1.6 m/s for a car on a flat street and the drone followed it down into a building)."""
         cfg = self.config
         if not np.isfinite(hold_height_m):
             return np.zeros(ACTION_DIM)
@@ -220,7 +235,7 @@ class ScriptedFollower:
         ahead_m = hold_height_m / np.tan(np.radians(cfg.camera_pitch_deg))
         error_xy = rel[:2] - np.array([ahead_m, 0.0])
         v_xy = cfg.velocity_feedforward * vel[:2] + cfg.position_gain_per_s * error_xy
-        v_z = cfg.height_gain_per_s * (hold_height_m - (-rel[2]))
+        v_z = cfg.height_gain_per_s * (hold_height_m - (-rel[2])) if tracked else 0.0
         return np.array([
             np.clip(v_xy[0] / cfg.max_speed_horizontal_mps, ACTION_LOW, ACTION_HIGH),
             np.clip(v_xy[1] / cfg.max_speed_horizontal_mps, ACTION_LOW, ACTION_HIGH),

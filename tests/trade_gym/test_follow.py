@@ -170,3 +170,23 @@ def test_the_height_to_hold_follows_the_estimate_through_the_hand_over_then_is_k
     np.testing.assert_array_equal(ups, 0.0)  # the held height is the estimate's: no vertical command
     up = policy.predict(_below(33.0))[0][2]  # after the hand-over: 33 m against the 32 m held
     assert up == pytest.approx(-config.height_gain_per_s * 1.0 / config.max_speed_vertical_mps, rel=1e-5)
+
+
+def _coasting(height_m: float) -> dict[str, np.ndarray]:
+    """An estimate right below at `height_m` without a valid track (the trajectory model coasting)."""
+    return {**_below(height_m), "track_valid": np.array([0.0], np.float32)}
+
+
+def test_the_height_is_held_where_it_is_while_the_track_is_lost():
+    """A coasting estimate that sinks (its vertical velocity is unmeasured) gives no vertical command, nor does it
+    move the height to hold during the hand-over; with the track back the held height is flown again."""
+    config = ScriptedFollowerConfig()
+    policy = ScriptedFollower(config)
+    for k in range(10):
+        policy.predict(_unfixed((0.5, 0.3)), episode_start=np.array([k == 0]))
+    policy.predict({**_below(32.0), "track_valid": np.array([1.0], np.float32)})  # the first estimate: 32 m
+    frames = round(config.handover_s * CAMERA_RATE_HZ)
+    ups = [policy.predict(_coasting(32.0 - 0.05 * k))[0][2] for k in range(1, frames + 5)]  # past the hand-over
+    np.testing.assert_array_equal(ups, 0.0)
+    up = policy.predict({**_below(30.0), "track_valid": np.array([1.0], np.float32)})[0][2]  # 2 m below 32 m held
+    assert up == pytest.approx(config.height_gain_per_s * 2.0 / config.max_speed_vertical_mps, rel=1e-5)
