@@ -79,7 +79,8 @@ class LearnedFollower:
     @property
     def residual_scale(self) -> float | None:
         """The residual's reach, None for a policy that flies alone."""
-        return None if self._residual is None else self._residual[1].scale
+        residual = self.residual
+        return None if residual is None else residual.scale
 
     @property
     def soft_start_s(self) -> float:

@@ -103,7 +103,7 @@ def track_valid(observation: dict[str, np.ndarray], n: int) -> np.ndarray:
     "track_valid" (a hand-built one: its estimate is then taken as measured)."""
     if "track_valid" not in observation:
         return np.ones(n, dtype=bool)
-    return np.asarray(observation["track_valid"], dtype=np.float64).reshape(n) > 0.5
+    return np.asarray(observation["track_valid"]).reshape(n) != 0.0  # the observation's {0, 1}
 
 
 HANDED_OVER_FRAMES = 2 ** 62  # `_Episodes.fixed_frames` of an episode with no servo to hand over from
